@@ -1,0 +1,49 @@
+//! Errors of the core. Every problem with user input is an [`InputError`]: it names the file
+//! (or the scene key) and says what is wrong in one line, so the CLI can print it and exit 2
+//! and the app can show it without losing anything the user made.
+
+use std::path::{Path, PathBuf};
+
+/// A problem with something the user supplied: a file, a folder or a value in one.
+#[derive(Debug, Clone, thiserror::Error, PartialEq)]
+#[error("{}: {problem}", path.display())]
+pub struct InputError {
+    /// The file (or folder) at fault, as the user would recognise it.
+    pub path: PathBuf,
+    /// What is wrong, in words, without the path.
+    pub problem: String,
+}
+
+impl InputError {
+    pub fn new(path: impl AsRef<Path>, problem: impl Into<String>) -> Self {
+        Self {
+            path: path.as_ref().to_path_buf(),
+            problem: problem.into(),
+        }
+    }
+}
+
+/// Everything the core can fail with.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// Bad input: exit code 2 at the CLI.
+    #[error(transparent)]
+    Input(#[from] InputError),
+    /// Writing an output failed (disk full, permissions): not the input's fault.
+    #[error("{}: cannot write: {source}", path.display())]
+    Write {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// The user cancelled long work.
+    #[error("cancelled")]
+    Cancelled,
+}
+
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// Shorthand for an [`InputError`] wrapped in [`Error`].
+pub fn input_err(path: impl AsRef<Path>, problem: impl Into<String>) -> Error {
+    Error::Input(InputError::new(path, problem))
+}

@@ -1,0 +1,368 @@
+//! The camera model of the paper's eq. 10–11 (OpenCV convention: k1, k2 radial, p1, p2
+//! decentering; pixel centres at integer coordinates), with analytic Jacobians of a projected
+//! point with respect to the 3D point and to the five intrinsics the fit corrects under zoom
+//! (fx, fy, cx, cy, k1; the paper's Table III).
+
+use glam::{DMat3, DVec2, DVec3};
+
+/// Points closer to the camera plane than this (mm) are not projected.
+pub const NEAR_MM: f64 = 1e-3;
+
+/// The eight intrinsics of eq. 10, in pixels (focal lengths, principal point) and unitless
+/// (distortion).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Intrinsics {
+    pub fx: f64,
+    pub fy: f64,
+    pub cx: f64,
+    pub cy: f64,
+    pub k1: f64,
+    pub k2: f64,
+    pub p1: f64,
+    pub p2: f64,
+}
+
+/// Which intrinsics the fit may correct, in this order (the paper's π_m).
+pub const CORRECTED_INTRINSICS: [&str; 5] = ["fx", "fy", "cx", "cy", "k1"];
+
+/// Rigid map from camera-0 (reference) coordinates into this camera, eq. 11, millimetres.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Extrinsics {
+    pub rotation: DMat3,
+    pub translation_mm: DVec3,
+}
+
+impl Default for Extrinsics {
+    fn default() -> Self {
+        Self {
+            rotation: DMat3::IDENTITY,
+            translation_mm: DVec3::ZERO,
+        }
+    }
+}
+
+/// One camera of the rig: image size, intrinsics and extrinsics.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Camera {
+    pub name: String,
+    pub width: u32,
+    pub height: u32,
+    pub intrinsics: Intrinsics,
+    pub extrinsics: Extrinsics,
+}
+
+/// Intermediate values of a projection, shared by the projection and its Jacobians.
+struct Distorted {
+    xn: f64,
+    yn: f64,
+    r2: f64,
+    radial: f64,
+    xd: f64,
+    yd: f64,
+}
+
+impl Intrinsics {
+    pub fn pinhole(fx: f64, fy: f64, cx: f64, cy: f64) -> Self {
+        Self {
+            fx,
+            fy,
+            cx,
+            cy,
+            k1: 0.0,
+            k2: 0.0,
+            p1: 0.0,
+            p2: 0.0,
+        }
+    }
+
+    pub fn has_distortion(&self) -> bool {
+        self.k1 != 0.0 || self.k2 != 0.0 || self.p1 != 0.0 || self.p2 != 0.0
+    }
+
+    fn distort_parts(&self, xn: f64, yn: f64) -> Distorted {
+        let r2 = xn * xn + yn * yn;
+        let radial = 1.0 + self.k1 * r2 + self.k2 * r2 * r2;
+        let xd = xn * radial + 2.0 * self.p1 * xn * yn + self.p2 * (r2 + 2.0 * xn * xn);
+        let yd = yn * radial + self.p1 * (r2 + 2.0 * yn * yn) + 2.0 * self.p2 * xn * yn;
+        Distorted {
+            xn,
+            yn,
+            r2,
+            radial,
+            xd,
+            yd,
+        }
+    }
+
+    /// Distorts normalised coordinates (x', y') into (x'', y'') of eq. 10.
+    pub fn distort(&self, normalized: DVec2) -> DVec2 {
+        let d = self.distort_parts(normalized.x, normalized.y);
+        DVec2::new(d.xd, d.yd)
+    }
+
+    /// Projects a point given in this camera's coordinates (mm) to pixels, or `None` when it
+    /// lies behind the camera.
+    pub fn project(&self, p: DVec3) -> Option<DVec2> {
+        if p.z <= NEAR_MM {
+            return None;
+        }
+        let d = self.distort_parts(p.x / p.z, p.y / p.z);
+        Some(DVec2::new(
+            self.fx * d.xd + self.cx,
+            self.fy * d.yd + self.cy,
+        ))
+    }
+
+    /// Jacobian of the pixel with respect to the camera-frame point, rows (u, v), columns
+    /// (X, Y, Z). `None` behind the camera.
+    pub fn jacobian_point(&self, p: DVec3) -> Option<[[f64; 3]; 2]> {
+        if p.z <= NEAR_MM {
+            return None;
+        }
+        let inv_z = 1.0 / p.z;
+        let d = self.distort_parts(p.x * inv_z, p.y * inv_z);
+        let (x, y) = (d.xn, d.yn);
+        // Derivative of the radial factor with respect to r², then the 2×2 distortion Jacobian.
+        let dradial = self.k1 + 2.0 * self.k2 * d.r2;
+        let dxd_dx = d.radial + 2.0 * x * x * dradial + 2.0 * self.p1 * y + 6.0 * self.p2 * x;
+        let dxd_dy = 2.0 * x * y * dradial + 2.0 * self.p1 * x + 2.0 * self.p2 * y;
+        let dyd_dx = 2.0 * x * y * dradial + 2.0 * self.p1 * x + 2.0 * self.p2 * y;
+        let dyd_dy = d.radial + 2.0 * y * y * dradial + 6.0 * self.p1 * y + 2.0 * self.p2 * x;
+        // x' = X/Z, y' = Y/Z.
+        let dn = [[inv_z, 0.0, -x * inv_z], [0.0, inv_z, -y * inv_z]];
+        let mut j = [[0.0; 3]; 2];
+        for c in 0..3 {
+            j[0][c] = self.fx * (dxd_dx * dn[0][c] + dxd_dy * dn[1][c]);
+            j[1][c] = self.fy * (dyd_dx * dn[0][c] + dyd_dy * dn[1][c]);
+        }
+        Some(j)
+    }
+
+    /// Jacobian of the pixel with respect to (fx, fy, cx, cy, k1), the paper's Table III.
+    pub fn jacobian_intrinsics(&self, p: DVec3) -> Option<[[f64; 5]; 2]> {
+        if p.z <= NEAR_MM {
+            return None;
+        }
+        let d = self.distort_parts(p.x / p.z, p.y / p.z);
+        Some([
+            [d.xd, 0.0, 1.0, 0.0, self.fx * d.xn * d.r2],
+            [0.0, d.yd, 0.0, 1.0, self.fy * d.yn * d.r2],
+        ])
+    }
+
+    /// Inverts the distortion: the normalised coordinates (x', y') whose projection is
+    /// `pixel`. Newton iterations on eq. 10; exact to ~1e-12 for the distortions of real
+    /// endoscopes.
+    pub fn unproject(&self, pixel: DVec2) -> DVec2 {
+        let target = DVec2::new((pixel.x - self.cx) / self.fx, (pixel.y - self.cy) / self.fy);
+        if !self.has_distortion() {
+            return target;
+        }
+        let mut n = target;
+        for _ in 0..20 {
+            let d = self.distort_parts(n.x, n.y);
+            let residual = DVec2::new(d.xd, d.yd) - target;
+            if residual.length_squared() < 1e-26 {
+                break;
+            }
+            // Jacobian of (x'', y'') with respect to (x', y') at n.
+            let dradial = self.k1 + 2.0 * self.k2 * d.r2;
+            let a =
+                d.radial + 2.0 * n.x * n.x * dradial + 2.0 * self.p1 * n.y + 6.0 * self.p2 * n.x;
+            let b = 2.0 * n.x * n.y * dradial + 2.0 * self.p1 * n.x + 2.0 * self.p2 * n.y;
+            let c = b;
+            let e =
+                d.radial + 2.0 * n.y * n.y * dradial + 6.0 * self.p1 * n.y + 2.0 * self.p2 * n.x;
+            let det = a * e - b * c;
+            if det.abs() < 1e-12 {
+                break;
+            }
+            n -= DVec2::new(
+                e * residual.x - b * residual.y,
+                -c * residual.x + a * residual.y,
+            ) / det;
+        }
+        n
+    }
+
+    /// Parameters as an array in [`CORRECTED_INTRINSICS`] order.
+    pub fn corrected(&self) -> [f64; 5] {
+        [self.fx, self.fy, self.cx, self.cy, self.k1]
+    }
+
+    pub fn with_corrected(mut self, v: [f64; 5]) -> Self {
+        [self.fx, self.fy, self.cx, self.cy, self.k1] = v;
+        self
+    }
+}
+
+impl Extrinsics {
+    pub fn apply(&self, p_ref: DVec3) -> DVec3 {
+        self.rotation * p_ref + self.translation_mm
+    }
+
+    /// The camera centre in reference (camera-0) coordinates, mm.
+    pub fn center_mm(&self) -> DVec3 {
+        -(self.rotation.transpose() * self.translation_mm)
+    }
+}
+
+impl Camera {
+    /// Maps a reference-frame (camera-0) point into this camera's frame (eq. 11).
+    pub fn to_camera(&self, p_ref: DVec3) -> DVec3 {
+        self.extrinsics.apply(p_ref)
+    }
+
+    /// Projects a reference-frame point to this camera's pixels (eq. 10–11).
+    pub fn project(&self, p_ref: DVec3) -> Option<DVec2> {
+        self.intrinsics.project(self.to_camera(p_ref))
+    }
+
+    /// Jacobian of the pixel with respect to the reference-frame point: J_proj · R_m.
+    pub fn jacobian_ref_point(&self, p_ref: DVec3) -> Option<[[f64; 3]; 2]> {
+        let j = self.intrinsics.jacobian_point(self.to_camera(p_ref))?;
+        let r = self.extrinsics.rotation;
+        let mut out = [[0.0; 3]; 2];
+        for (row, jr) in out.iter_mut().zip(j.iter()) {
+            for (c, o) in row.iter_mut().enumerate() {
+                // Column c of R is its c-th column vector; (J R)[row][c] = Σ_k J[row][k] R[k][c].
+                let col = r.col(c);
+                *o = jr[0] * col.x + jr[1] * col.y + jr[2] * col.z;
+            }
+        }
+        Some(out)
+    }
+
+    /// Unit ray direction (camera-0 coordinates) and origin through a pixel.
+    pub fn pixel_ray(&self, pixel: DVec2) -> (DVec3, DVec3) {
+        let n = self.intrinsics.unproject(pixel);
+        let dir_cam = DVec3::new(n.x, n.y, 1.0).normalize();
+        let rt = self.extrinsics.rotation.transpose();
+        (self.extrinsics.center_mm(), rt * dir_cam)
+    }
+
+    /// Distance between this camera's centre and camera 0's, mm.
+    pub fn baseline_mm(&self) -> f64 {
+        self.extrinsics.center_mm().length()
+    }
+
+    pub fn pixel_count(&self) -> usize {
+        self.width as usize * self.height as usize
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::Rng;
+
+    fn random_camera(rng: &mut Rng) -> Camera {
+        let fx = rng.range(600.0, 1400.0);
+        let intr = Intrinsics {
+            fx,
+            fy: fx * rng.range(0.95, 1.05),
+            cx: rng.range(300.0, 500.0),
+            cy: rng.range(200.0, 300.0),
+            k1: rng.range(-0.2, 0.2),
+            k2: rng.range(-0.05, 0.05),
+            p1: rng.range(-0.005, 0.005),
+            p2: rng.range(-0.005, 0.005),
+        };
+        let rot =
+            crate::geometry::pose::rotation_from_vector(rng.unit_vector() * rng.range(0.0, 0.2));
+        Camera {
+            name: "c".into(),
+            width: 960,
+            height: 540,
+            intrinsics: intr,
+            extrinsics: Extrinsics {
+                rotation: rot,
+                translation_mm: DVec3::new(
+                    rng.range(-5.0, 5.0),
+                    rng.range(-1.0, 1.0),
+                    rng.range(-1.0, 1.0),
+                ),
+            },
+        }
+    }
+
+    fn random_point(rng: &mut Rng) -> DVec3 {
+        DVec3::new(
+            rng.range(-40.0, 40.0),
+            rng.range(-30.0, 30.0),
+            rng.range(80.0, 250.0),
+        )
+    }
+
+    #[test]
+    fn point_jacobian_matches_central_differences() {
+        let mut rng = Rng::new(11);
+        for _ in 0..200 {
+            let cam = random_camera(&mut rng);
+            let p = random_point(&mut rng);
+            let j = cam.jacobian_ref_point(p).unwrap();
+            for c in 0..3 {
+                let h = 1e-4;
+                let mut e = DVec3::ZERO;
+                e[c] = h;
+                let fd = (cam.project(p + e).unwrap() - cam.project(p - e).unwrap()) / (2.0 * h);
+                for (r, fdv) in [fd.x, fd.y].iter().enumerate() {
+                    let err = (j[r][c] - fdv).abs();
+                    assert!(
+                        err < 1e-5 * (1.0 + fdv.abs()),
+                        "d{r}/dP{c}: {} vs {fdv}",
+                        j[r][c]
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn intrinsics_jacobian_matches_central_differences() {
+        let mut rng = Rng::new(12);
+        for _ in 0..200 {
+            let cam = random_camera(&mut rng);
+            let p = cam.to_camera(random_point(&mut rng));
+            let j = cam.intrinsics.jacobian_intrinsics(p).unwrap();
+            for k in 0..5 {
+                let h = [1e-3, 1e-3, 1e-3, 1e-3, 1e-6][k];
+                let mut plus = cam.intrinsics.corrected();
+                let mut minus = plus;
+                plus[k] += h;
+                minus[k] -= h;
+                let a = cam.intrinsics.with_corrected(plus).project(p).unwrap();
+                let b = cam.intrinsics.with_corrected(minus).project(p).unwrap();
+                let fd = (a - b) / (2.0 * h);
+                for (r, fdv) in [fd.x, fd.y].iter().enumerate() {
+                    let err = (j[r][k] - fdv).abs();
+                    assert!(
+                        err < 1e-5 * (1.0 + fdv.abs()),
+                        "d{r}/d{}: {} vs {fdv}",
+                        CORRECTED_INTRINSICS[k],
+                        j[r][k]
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn unproject_inverts_project() {
+        let mut rng = Rng::new(13);
+        for _ in 0..200 {
+            let cam = random_camera(&mut rng);
+            let p = cam.to_camera(random_point(&mut rng));
+            let px = cam.intrinsics.project(p).unwrap();
+            let n = cam.intrinsics.unproject(px);
+            assert!((n - DVec2::new(p.x / p.z, p.y / p.z)).length() < 1e-9);
+        }
+    }
+
+    #[test]
+    fn behind_the_camera_is_not_projected() {
+        let cam = Intrinsics::pinhole(1000.0, 1000.0, 480.0, 270.0);
+        assert!(cam.project(DVec3::new(0.0, 0.0, -5.0)).is_none());
+        assert!(cam.jacobian_point(DVec3::new(1.0, 0.0, 0.0)).is_none());
+    }
+}

@@ -1,0 +1,179 @@
+//! Triangle meshes of the preoperative structures (millimetres): validation with errors that
+//! say which vertex or face is wrong, normals, and simple measures.
+
+use glam::DVec3;
+
+/// An indexed triangle mesh. Vertex order matters: shape catalogs and PCA modes rely on it.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Mesh {
+    pub vertices: Vec<DVec3>,
+    pub faces: Vec<[u32; 3]>,
+}
+
+impl Mesh {
+    pub fn new(vertices: Vec<DVec3>, faces: Vec<[u32; 3]>) -> Self {
+        Self { vertices, faces }
+    }
+
+    /// Checks what every later stage relies on; the message says which element is wrong.
+    /// Degenerate faces (repeated index, or zero area) are refused: they have no normal and
+    /// usually mean a broken export.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.vertices.is_empty() {
+            return Err("mesh has no vertices".into());
+        }
+        if self.faces.is_empty() {
+            return Err("mesh has no faces".into());
+        }
+        if let Some(i) = self.vertices.iter().position(|v| !v.is_finite()) {
+            return Err(format!(
+                "vertex {} has a non-finite coordinate ({:?})",
+                i + 1,
+                self.vertices[i]
+            ));
+        }
+        let n = self.vertices.len() as u32;
+        let extent = self
+            .bounding_box()
+            .map(|(lo, hi)| (hi - lo).max_element())
+            .unwrap_or(0.0);
+        for (fi, f) in self.faces.iter().enumerate() {
+            if let Some(&bad) = f.iter().find(|&&i| i >= n) {
+                return Err(format!(
+                    "face {} refers to vertex {} but the mesh has {} vertices",
+                    fi + 1,
+                    bad as u64 + 1,
+                    n
+                ));
+            }
+            if f[0] == f[1] || f[1] == f[2] || f[0] == f[2] {
+                return Err(format!(
+                    "face {} is degenerate (repeats a vertex: {:?})",
+                    fi + 1,
+                    f.map(|i| i + 1)
+                ));
+            }
+            let area2 = self.face_cross(fi).length();
+            if area2 <= 1e-12 * extent * extent {
+                return Err(format!("face {} is degenerate (zero area)", fi + 1));
+            }
+        }
+        Ok(())
+    }
+
+    fn face_cross(&self, face: usize) -> DVec3 {
+        let [a, b, c] = self.faces[face].map(|i| self.vertices[i as usize]);
+        (b - a).cross(c - a)
+    }
+
+    /// Area-weighted vertex normals (unit length; zero for unreferenced vertices).
+    pub fn vertex_normals(&self) -> Vec<DVec3> {
+        vertex_normals(&self.vertices, &self.faces)
+    }
+
+    pub fn bounding_box(&self) -> Option<(DVec3, DVec3)> {
+        let first = *self.vertices.first()?;
+        Some(
+            self.vertices
+                .iter()
+                .fold((first, first), |(lo, hi), v| (lo.min(*v), hi.max(*v))),
+        )
+    }
+
+    /// Mean of the vertices (the centroid the contract reports), mm.
+    pub fn vertex_mean(&self) -> DVec3 {
+        vertex_mean(&self.vertices)
+    }
+
+    /// Signed volume (positive when faces wind counter-clockwise seen from outside), mm³.
+    pub fn signed_volume(&self) -> f64 {
+        self.faces
+            .iter()
+            .map(|f| {
+                let [a, b, c] = f.map(|i| self.vertices[i as usize]);
+                a.dot(b.cross(c)) / 6.0
+            })
+            .sum()
+    }
+
+    /// Flips every face so that the signed volume is positive (normals point outwards).
+    pub fn orient_outwards(&mut self) {
+        if self.signed_volume() < 0.0 {
+            for f in &mut self.faces {
+                f.swap(1, 2);
+            }
+        }
+    }
+}
+
+/// Area-weighted unit vertex normals of a vertex array under a face list.
+pub fn vertex_normals(vertices: &[DVec3], faces: &[[u32; 3]]) -> Vec<DVec3> {
+    let mut normals = vec![DVec3::ZERO; vertices.len()];
+    for f in faces {
+        let [a, b, c] = f.map(|i| vertices[i as usize]);
+        let n = (b - a).cross(c - a);
+        for &i in f {
+            normals[i as usize] += n;
+        }
+    }
+    for n in &mut normals {
+        *n = n.normalize_or_zero();
+    }
+    normals
+}
+
+pub fn vertex_mean(vertices: &[DVec3]) -> DVec3 {
+    if vertices.is_empty() {
+        return DVec3::ZERO;
+    }
+    vertices.iter().copied().sum::<DVec3>() / vertices.len() as f64
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tetra() -> Mesh {
+        Mesh::new(
+            vec![DVec3::ZERO, DVec3::X, DVec3::Y, DVec3::Z],
+            vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
+        )
+    }
+
+    #[test]
+    fn validation_names_the_bad_element() {
+        assert!(tetra().validate().is_ok());
+        let mut m = tetra();
+        m.vertices[2].y = f64::NAN;
+        assert!(m.validate().unwrap_err().contains("vertex 3"));
+        let mut m = tetra();
+        m.faces[1] = [0, 1, 9];
+        assert!(
+            m.validate()
+                .unwrap_err()
+                .contains("face 2 refers to vertex 10")
+        );
+        let mut m = tetra();
+        m.faces[0] = [0, 0, 1];
+        assert!(m.validate().unwrap_err().contains("degenerate"));
+        let mut m = tetra();
+        m.vertices.push(DVec3::new(2.0, 0.0, 0.0));
+        m.faces.push([0, 1, 4]);
+        assert!(m.validate().unwrap_err().contains("zero area"));
+    }
+
+    #[test]
+    fn volume_and_orientation() {
+        let mut m = tetra();
+        assert!((m.signed_volume() - 1.0 / 6.0).abs() < 1e-12);
+        for f in &mut m.faces {
+            f.swap(1, 2);
+        }
+        assert!(m.signed_volume() < 0.0);
+        m.orient_outwards();
+        assert!(m.signed_volume() > 0.0);
+        let n = m.vertex_normals();
+        // The apex normal of the origin vertex points away from the tetrahedron.
+        assert!(n[0].dot(DVec3::ONE) < 0.0);
+    }
+}

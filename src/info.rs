@@ -1,0 +1,169 @@
+//! The readable summary `endofuse info` prints: what a scene holds, in the words an analyst
+//! would use to check it before a long run.
+
+use crate::scene::{SEED_BACKGROUND, Scene};
+use crate::shape::CatalogSource;
+use std::fmt::Write;
+
+pub fn summary(scene: &Scene) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "scene: {}", scene.origin);
+    let _ = writeln!(
+        s,
+        "frames: {} at {} fps ({:.1} s)",
+        scene.frame_count,
+        scene.fps,
+        scene.frame_count as f64 / scene.fps
+    );
+    let _ = writeln!(s, "cameras ({}):", scene.cameras.len());
+    for (i, c) in scene.cameras.iter().enumerate() {
+        let k = &c.intrinsics;
+        let _ = write!(
+            s,
+            "  {:<8} {}×{}  fx {:.1}  fy {:.1}  cx {:.1}  cy {:.1}  k1 {:.4}  k2 {:.4}  p1 {:.4}  p2 {:.4}",
+            c.name, c.width, c.height, k.fx, k.fy, k.cx, k.cy, k.k1, k.k2, k.p1, k.p2
+        );
+        if i > 0 {
+            let _ = write!(s, "  baseline {:.2} mm", c.baseline_mm());
+        }
+        s.push('\n');
+    }
+    let _ = writeln!(s, "structures ({}):", scene.structures.len());
+    for (i, st) in scene.structures.iter().enumerate() {
+        let (first, count) = scene.shape.parts[i];
+        let _ = first;
+        let catalog = match &st.catalog {
+            Some(c) => format!("catalog of {} shapes", c.len()),
+            None => "no catalog".into(),
+        };
+        let _ = writeln!(
+            s,
+            "  {:<12} label {:<3} {:<8} {:>5} vertices {:>5} faces  {}  ({})",
+            st.name,
+            st.label,
+            if st.visible { "visible" } else { "hidden" },
+            count,
+            st.mesh.faces.len(),
+            catalog,
+            st.mesh_path.display()
+        );
+    }
+    let pca = &scene.shape.pca;
+    let source = match scene.shape.source {
+        CatalogSource::Given => "from the given catalogs",
+        CatalogSource::Transferred => "from the organ's catalog, carried to the other structures",
+        CatalogSource::Generated => "from generated push/pull deformations",
+    };
+    let sigmas: Vec<String> = pca
+        .sigma_mm
+        .iter()
+        .take(4)
+        .map(|v| format!("{v:.1}"))
+        .collect();
+    let _ = writeln!(
+        s,
+        "shape model: joint over {} structures, {} shapes {source}; {} PCA modes explain {:.1}% of the variance (σ mm: {}{})",
+        scene.structures.len(),
+        pca.sample_count,
+        pca.mode_count(),
+        100.0 * pca.explained_share,
+        sigmas.join(", "),
+        if pca.mode_count() > 4 { ", …" } else { "" }
+    );
+    match &scene.initial_pose {
+        Some(p) => {
+            let t = p.translation_mm();
+            let scale = p.linear().determinant().cbrt();
+            let _ = writeln!(
+                s,
+                "initial pose: given, translation ({:.1}, {:.1}, {:.1}) mm, scale {:.3}",
+                t.x, t.y, t.z, scale
+            );
+        }
+        None => {
+            let _ = writeln!(s, "initial pose: none (automatic initialisation)");
+        }
+    }
+    let frames = scene.seeds.seeded_frames();
+    if frames.is_empty() {
+        let _ = writeln!(s, "seeds: none");
+    } else {
+        let counts = scene.seeds.pixel_counts();
+        let classes: Vec<String> = counts
+            .iter()
+            .map(|(&v, &n)| {
+                let name = if v == SEED_BACKGROUND {
+                    "background".to_string()
+                } else {
+                    scene
+                        .structure_by_label(v)
+                        .map(|s| s.name.clone())
+                        .unwrap_or_else(|| format!("label {v}"))
+                };
+                format!("{name} {n} px")
+            })
+            .collect();
+        let _ = writeln!(s, "seeds: frames {}: {}", list(&frames), classes.join(", "));
+    }
+    let gt = &scene.ground_truth;
+    let gt_frames = scene.ground_truth_frames();
+    let mut parts = Vec::new();
+    if !gt_frames.is_empty() {
+        parts.push(format!("labels for {} frames", gt_frames.len()));
+    }
+    if let (Some(t), Some(root)) = (&gt.hidden, &scene.root) {
+        for st in scene.structures.iter().filter(|s| !s.visible) {
+            if root
+                .join(t.expand(0, &scene.cameras[0].name, &st.name))
+                .exists()
+            {
+                parts.push(format!("hidden masks of {}", st.name));
+            }
+        }
+    }
+    if let Some(tr) = &gt.trajectory {
+        parts.push(format!("trajectory ({} frames)", tr.frames.len()));
+    }
+    let _ = writeln!(
+        s,
+        "ground truth: {}",
+        if parts.is_empty() {
+            "none".into()
+        } else {
+            parts.join(", ")
+        }
+    );
+    if scene.zoom_changes.is_empty() {
+        let _ = writeln!(s, "zoom changes: none");
+    } else {
+        let z: Vec<String> = scene
+            .zoom_changes
+            .iter()
+            .map(|(a, b)| format!("{a}–{b}"))
+            .collect();
+        let _ = writeln!(s, "zoom changes: frames {}", z.join(", "));
+    }
+    s
+}
+
+/// "0, 1, 2" or "0–9, 20" for a sorted list.
+fn list(v: &[usize]) -> String {
+    let mut out: Vec<String> = Vec::new();
+    let mut i = 0;
+    while i < v.len() {
+        let mut j = i;
+        while j + 1 < v.len() && v[j + 1] == v[j] + 1 {
+            j += 1;
+        }
+        out.push(if j - i >= 2 {
+            format!("{}–{}", v[i], v[j])
+        } else {
+            (i..=j)
+                .map(|k| v[k].to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        });
+        i = j + 1;
+    }
+    out.join(", ")
+}

@@ -1,0 +1,16 @@
+//! endofuse core: fuses preoperative CT models with stereo endoscopic video (Nosrati et al.,
+//! multi-structure segmentation and non-rigid pose estimation). Knows nothing of the GUI; the
+//! app and the CLI are two faces over these functions.
+
+pub mod error;
+pub mod geometry;
+pub mod info;
+pub mod plane;
+pub mod render;
+pub mod rng;
+pub mod scene;
+pub mod shape;
+pub mod synth;
+
+pub use error::{Error, InputError, Result};
+pub use scene::Scene;

@@ -1,0 +1,192 @@
+//! Exact Euclidean distance transform (Felzenszwalb & Huttenlocher 2012: lower envelope of
+//! parabolas, one pass over columns and one over rows, O(pixels)) and the signed distance map
+//! φ of eq. 3/6, positive inside, with the contour half-way between inside and outside pixels.
+
+use crate::plane::{DistanceMap, Mask, Plane};
+
+/// Squared distance (px²) from every pixel to the nearest `true` pixel of `features`;
+/// `f32::INFINITY` everywhere when there is none.
+pub fn squared_edt(features: &Mask) -> DistanceMap {
+    let (w, h) = (features.width, features.height);
+    let mut grid: Vec<f64> = features
+        .data
+        .iter()
+        .map(|&f| if f { 0.0 } else { f64::INFINITY })
+        .collect();
+    let n = w.max(h);
+    let mut f = vec![0.0; n];
+    let mut d = vec![0.0; n];
+    let mut v = vec![0usize; n];
+    let mut z = vec![0.0; n + 1];
+    for x in 0..w {
+        for y in 0..h {
+            f[y] = grid[y * w + x];
+        }
+        edt_1d(&f[..h], &mut d[..h], &mut v, &mut z);
+        for y in 0..h {
+            grid[y * w + x] = d[y];
+        }
+    }
+    for y in 0..h {
+        let row = &mut grid[y * w..(y + 1) * w];
+        f[..w].copy_from_slice(row);
+        edt_1d(&f[..w], &mut d[..w], &mut v, &mut z);
+        row.copy_from_slice(&d[..w]);
+    }
+    Plane {
+        width: w,
+        height: h,
+        data: grid.into_iter().map(|x| x as f32).collect(),
+    }
+}
+
+/// 1D squared distance transform of the sampled function `f` (∞ = no feature).
+fn edt_1d(f: &[f64], d: &mut [f64], v: &mut [usize], z: &mut [f64]) {
+    let n = f.len();
+    let Some(first) = f.iter().position(|x| x.is_finite()) else {
+        d.fill(f64::INFINITY);
+        return;
+    };
+    let mut k = 0;
+    v[0] = first;
+    z[0] = f64::NEG_INFINITY;
+    z[1] = f64::INFINITY;
+    for q in first + 1..n {
+        if !f[q].is_finite() {
+            continue;
+        }
+        let parabola_cut = |p: usize| {
+            ((f[q] + (q * q) as f64) - (f[p] + (p * p) as f64)) / (2.0 * (q as f64 - p as f64))
+        };
+        let mut s = parabola_cut(v[k]);
+        // z[0] is −∞, so this never pops the first parabola.
+        while s <= z[k] {
+            k -= 1;
+            s = parabola_cut(v[k]);
+        }
+        k += 1;
+        v[k] = q;
+        z[k] = s;
+        z[k + 1] = f64::INFINITY;
+    }
+    let mut k = 0;
+    for (q, out) in d.iter_mut().enumerate() {
+        while z[k + 1] < q as f64 {
+            k += 1;
+        }
+        let p = v[k];
+        let dq = q as f64 - p as f64;
+        *out = dq * dq + f[p];
+    }
+}
+
+/// φ of eq. 3/6 for a silhouette: inside, the distance to the nearest outside pixel minus ½;
+/// outside, minus (the distance to the nearest inside pixel minus ½). So the zero level lies
+/// half-way between neighbouring inside and outside pixels. An empty mask gives −(w+h)
+/// everywhere, a full one +(w+h).
+pub fn signed_distance(mask: &Mask) -> DistanceMap {
+    let far = (mask.width + mask.height) as f32;
+    let to_inside = squared_edt(mask);
+    let to_outside = squared_edt(&mask.map(|&m| !m));
+    let data = mask
+        .data
+        .iter()
+        .zip(to_inside.data.iter().zip(&to_outside.data))
+        .map(|(&inside, (&di, &doo))| {
+            if inside {
+                if doo.is_finite() {
+                    doo.sqrt() - 0.5
+                } else {
+                    far
+                }
+            } else if di.is_finite() {
+                -(di.sqrt() - 0.5)
+            } else {
+                -far
+            }
+        })
+        .collect();
+    Plane {
+        width: mask.width,
+        height: mask.height,
+        data,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::Rng;
+
+    fn brute_squared(features: &Mask) -> Vec<f32> {
+        let pts: Vec<(i64, i64)> = (0..features.height)
+            .flat_map(|y| (0..features.width).map(move |x| (x, y)))
+            .filter(|&(x, y)| *features.get(x, y))
+            .map(|(x, y)| (x as i64, y as i64))
+            .collect();
+        (0..features.height)
+            .flat_map(|y| (0..features.width).map(move |x| (x as i64, y as i64)))
+            .map(|(x, y)| {
+                pts.iter()
+                    .map(|&(a, b)| ((a - x).pow(2) + (b - y).pow(2)) as f32)
+                    .fold(f32::INFINITY, f32::min)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn edt_equals_brute_force_on_random_masks() {
+        let mut rng = Rng::new(51);
+        for trial in 0..60 {
+            let (w, h) = (1 + rng.below(40), 1 + rng.below(30));
+            let density = [0.0, 0.002, 0.02, 0.2, 0.7][trial % 5];
+            let mask = Plane::from_vec(w, h, (0..w * h).map(|_| rng.uniform() < density).collect())
+                .unwrap();
+            let fast = squared_edt(&mask);
+            assert_eq!(fast.data, brute_squared(&mask), "{w}x{h} density {density}");
+        }
+    }
+
+    #[test]
+    fn signed_distance_equals_brute_force_and_approximates_a_disc() {
+        let mut rng = Rng::new(52);
+        for _ in 0..20 {
+            let (w, h) = (10 + rng.below(40), 10 + rng.below(40));
+            let mask =
+                Plane::from_vec(w, h, (0..w * h).map(|_| rng.uniform() < 0.4).collect()).unwrap();
+            let phi = signed_distance(&mask);
+            let din = brute_squared(&mask);
+            let dout = brute_squared(&mask.map(|&m| !m));
+            for i in 0..w * h {
+                let expect = if mask.data[i] {
+                    dout[i].sqrt() - 0.5
+                } else {
+                    -(din[i].sqrt() - 0.5)
+                };
+                assert!((phi.data[i] - expect).abs() < 1e-5);
+                assert_eq!(phi.data[i] > 0.0, mask.data[i], "sign says inside");
+            }
+        }
+        // A disc: φ is the signed distance to the circle within a pixel.
+        let (w, h, r) = (64, 64, 20.0f64);
+        let mask = Plane::from_vec(
+            w,
+            h,
+            (0..w * h)
+                .map(|i| ((i % w) as f64 - 31.5).hypot((i / w) as f64 - 31.5) < r)
+                .collect(),
+        )
+        .unwrap();
+        let phi = signed_distance(&mask);
+        for i in 0..w * h {
+            let truth = r - ((i % w) as f64 - 31.5).hypot((i / w) as f64 - 31.5);
+            assert!(
+                (phi.data[i] as f64 - truth).abs() < 1.0,
+                "pixel {i}: {} vs {truth}",
+                phi.data[i]
+            );
+        }
+        let empty = signed_distance(&Plane::filled(5, 4, false));
+        assert!(empty.data.iter().all(|&v| v == -9.0));
+    }
+}

@@ -1,0 +1,459 @@
+//! CPU rasteriser of the fit: projects posed meshes through a camera (eq. 10–11, distortion
+//! included) and keeps, per pixel, the front-most surface's camera depth, object, triangle and
+//! perspective-correct barycentrics — so the fit can find the 3D point behind any pixel.
+//!
+//! Distortion bends straight edges, so a triangle whose projected edges bow by more than a
+//! tolerance is split into four in 3D (recursively) and each piece rasterised; barycentrics
+//! always refer to the original triangle. Pixels are sampled at their centres (integer
+//! coordinates, OpenCV's convention). Triangles reaching behind the near plane are skipped.
+
+use crate::geometry::Camera;
+use crate::geometry::camera::NEAR_MM;
+use crate::plane::{LabelImage, Mask, Plane};
+use glam::{DVec2, DVec3};
+
+/// Marks a pixel no surface covers.
+pub const NO_OBJECT: u8 = u8::MAX;
+pub const NO_TRIANGLE: u32 = u32::MAX;
+
+/// One posed mesh to draw: vertices in camera-0 (reference) coordinates, mm.
+#[derive(Debug, Clone, Copy)]
+pub struct RenderObject<'a> {
+    pub vertices: &'a [DVec3],
+    pub faces: &'a [[u32; 3]],
+}
+
+#[derive(Debug, Clone, Copy)]
+pub struct RasterOptions {
+    /// Largest bow (px) of a projected edge before the triangle is split.
+    pub tolerance_px: f64,
+    /// How many times a triangle may be split in four.
+    pub max_subdivision: u32,
+}
+
+impl Default for RasterOptions {
+    fn default() -> Self {
+        Self {
+            tolerance_px: 0.2,
+            max_subdivision: 5,
+        }
+    }
+}
+
+/// What one view sees of a set of objects, front-most surface per pixel.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ViewRaster {
+    /// Camera-frame depth Z (mm) of the front-most surface; ∞ where nothing is drawn.
+    pub depth_mm: Plane<f32>,
+    /// Index of the object drawn, [`NO_OBJECT`] where none.
+    pub object: Plane<u8>,
+    /// Face index within that object, [`NO_TRIANGLE`] where none.
+    pub triangle: Plane<u32>,
+    /// Barycentric weights of the face's vertices 1 and 2 (vertex 0 gets the rest).
+    pub barycentric: Plane<[f32; 2]>,
+}
+
+impl ViewRaster {
+    fn empty(width: usize, height: usize) -> Self {
+        Self {
+            depth_mm: Plane::filled(width, height, f32::INFINITY),
+            object: Plane::filled(width, height, NO_OBJECT),
+            triangle: Plane::filled(width, height, NO_TRIANGLE),
+            barycentric: Plane::filled(width, height, [0.0; 2]),
+        }
+    }
+
+    pub fn width(&self) -> usize {
+        self.object.width
+    }
+
+    pub fn height(&self) -> usize {
+        self.object.height
+    }
+
+    /// Pixels where `object` is the front-most surface.
+    pub fn visible_mask(&self, object: u8) -> Mask {
+        self.object.map(|&o| o == object)
+    }
+
+    /// Pixels covered by anything.
+    pub fn coverage(&self) -> Mask {
+        self.object.map(|&o| o != NO_OBJECT)
+    }
+
+    /// Label image: `labels[object]` where an object is front-most, 0 elsewhere.
+    pub fn label_image(&self, labels: &[u8]) -> LabelImage {
+        self.object
+            .map(|&o| labels.get(o as usize).copied().unwrap_or(0))
+    }
+
+    /// The reference-frame surface point behind pixel `i`, if any.
+    pub fn surface_point(&self, objects: &[RenderObject], i: usize) -> Option<DVec3> {
+        let o = *self.object.data.get(i)?;
+        let obj = objects.get(o as usize)?;
+        let f = obj.faces.get(self.triangle.data[i] as usize)?;
+        let [b1, b2] = self.barycentric.data[i].map(|b| b as f64);
+        let [a, b, c] = f.map(|k| obj.vertices[k as usize]);
+        Some(a * (1.0 - b1 - b2) + b * b1 + c * b2)
+    }
+}
+
+/// A projected vertex: pixel, camera depth, and where it lies in the original triangle.
+#[derive(Clone, Copy)]
+struct Corner {
+    cam: DVec3,
+    px: DVec2,
+    bary: DVec2,
+}
+
+/// Rasterises `objects` (at most 254) into one view of `camera`.
+pub fn rasterize(camera: &Camera, objects: &[RenderObject], options: &RasterOptions) -> ViewRaster {
+    let (w, h) = (camera.width as usize, camera.height as usize);
+    let mut out = ViewRaster::empty(w, h);
+    let intr = &camera.intrinsics;
+    let distorted = intr.has_distortion();
+    for (oi, obj) in objects.iter().enumerate().take(NO_OBJECT as usize) {
+        let cam: Vec<DVec3> = obj.vertices.iter().map(|&p| camera.to_camera(p)).collect();
+        let px: Vec<Option<DVec2>> = cam.iter().map(|&p| intr.project(p)).collect();
+        for (fi, f) in obj.faces.iter().enumerate() {
+            let idx = f.map(|k| k as usize);
+            if idx.iter().any(|&k| k >= cam.len()) {
+                continue;
+            }
+            let (Some(p0), Some(p1), Some(p2)) = (px[idx[0]], px[idx[1]], px[idx[2]]) else {
+                continue;
+            };
+            let corners = [
+                Corner {
+                    cam: cam[idx[0]],
+                    px: p0,
+                    bary: DVec2::ZERO,
+                },
+                Corner {
+                    cam: cam[idx[1]],
+                    px: p1,
+                    bary: DVec2::X,
+                },
+                Corner {
+                    cam: cam[idx[2]],
+                    px: p2,
+                    bary: DVec2::Y,
+                },
+            ];
+            let mut target = Target {
+                out: &mut out,
+                object: oi as u8,
+                triangle: fi as u32,
+            };
+            if distorted {
+                subdivide(camera, &corners, options, 0, &mut target);
+            } else {
+                fill_triangle(&corners, &mut target);
+            }
+        }
+    }
+    out
+}
+
+struct Target<'a> {
+    out: &'a mut ViewRaster,
+    object: u8,
+    triangle: u32,
+}
+
+/// Distance (px) from the projection of an edge's 3D midpoint to the straight projected edge.
+fn edge_bow(camera: &Camera, a: &Corner, b: &Corner) -> f64 {
+    let Some(m) = camera.intrinsics.project((a.cam + b.cam) * 0.5) else {
+        return f64::INFINITY;
+    };
+    let e = b.px - a.px;
+    let len = e.length();
+    if len < 1e-9 {
+        return (m - a.px).length();
+    }
+    (e.perp_dot(m - a.px) / len).abs()
+}
+
+fn subdivide(
+    camera: &Camera,
+    c: &[Corner; 3],
+    options: &RasterOptions,
+    level: u32,
+    target: &mut Target,
+) {
+    // Edges bow, and the interior stretches unevenly: check the centroid too.
+    let centroid_shift = camera
+        .intrinsics
+        .project((c[0].cam + c[1].cam + c[2].cam) / 3.0)
+        .map(|m| {
+            // Where a pinhole puts the 3D centroid: the corners' pixels weighted by depth.
+            let w = [c[0].cam.z, c[1].cam.z, c[2].cam.z];
+            let affine = (c[0].px * w[0] + c[1].px * w[1] + c[2].px * w[2]) / (w[0] + w[1] + w[2]);
+            (m - affine).length()
+        })
+        .unwrap_or(f64::INFINITY);
+    let bow = edge_bow(camera, &c[0], &c[1])
+        .max(edge_bow(camera, &c[1], &c[2]))
+        .max(edge_bow(camera, &c[2], &c[0]))
+        .max(centroid_shift);
+    if bow <= options.tolerance_px || level >= options.max_subdivision {
+        fill_triangle(c, target);
+        return;
+    }
+    let mid = |a: &Corner, b: &Corner| {
+        let cam = (a.cam + b.cam) * 0.5;
+        camera.intrinsics.project(cam).map(|px| Corner {
+            cam,
+            px,
+            bary: (a.bary + b.bary) * 0.5,
+        })
+    };
+    let (Some(m01), Some(m12), Some(m20)) =
+        (mid(&c[0], &c[1]), mid(&c[1], &c[2]), mid(&c[2], &c[0]))
+    else {
+        return;
+    };
+    for sub in [
+        [c[0], m01, m20],
+        [m01, c[1], m12],
+        [m20, m12, c[2]],
+        [m01, m12, m20],
+    ] {
+        subdivide(camera, &sub, options, level + 1, target);
+    }
+}
+
+/// Scan-converts one (sub)triangle with a depth test, sampling pixel centres.
+fn fill_triangle(c: &[Corner; 3], target: &mut Target) {
+    let (w, h) = (target.out.width(), target.out.height());
+    let [a, b, d] = [c[0].px, c[1].px, c[2].px];
+    let area = (b - a).perp_dot(d - a);
+    if area.abs() < 1e-12 || c.iter().any(|k| k.cam.z <= NEAR_MM) {
+        return;
+    }
+    let lo = a.min(b).min(d);
+    let hi = a.max(b).max(d);
+    if hi.x < 0.0 || hi.y < 0.0 || lo.x > (w - 1) as f64 || lo.y > (h - 1) as f64 {
+        return;
+    }
+    let x0 = lo.x.ceil().max(0.0) as usize;
+    let y0 = lo.y.ceil().max(0.0) as usize;
+    let x1 = (hi.x.floor() as i64).min(w as i64 - 1);
+    let y1 = (hi.y.floor() as i64).min(h as i64 - 1);
+    if x1 < x0 as i64 || y1 < y0 as i64 {
+        return;
+    }
+    let inv_area = 1.0 / area;
+    let inv_z = [1.0 / c[0].cam.z, 1.0 / c[1].cam.z, 1.0 / c[2].cam.z];
+    for y in y0..=y1 as usize {
+        let py = y as f64;
+        for x in x0..=x1 as usize {
+            let p = DVec2::new(x as f64, py);
+            // Normalised edge functions = screen-space barycentrics of this sub-triangle.
+            let l0 = (c[2].px - c[1].px).perp_dot(p - c[1].px) * inv_area;
+            let l1 = (c[0].px - c[2].px).perp_dot(p - c[2].px) * inv_area;
+            let l2 = 1.0 - l0 - l1;
+            if l0 < 0.0 || l1 < 0.0 || l2 < 0.0 {
+                continue;
+            }
+            // Perspective-correct: interpolate 1/Z and attribute/Z linearly in the image.
+            let iz = l0 * inv_z[0] + l1 * inv_z[1] + l2 * inv_z[2];
+            let z = 1.0 / iz;
+            let i = y * w + x;
+            if (z as f32) < target.out.depth_mm.data[i] {
+                let bary = (c[0].bary * (l0 * inv_z[0])
+                    + c[1].bary * (l1 * inv_z[1])
+                    + c[2].bary * (l2 * inv_z[2]))
+                    * z;
+                target.out.depth_mm.data[i] = z as f32;
+                target.out.object.data[i] = target.object;
+                target.out.triangle.data[i] = target.triangle;
+                target.out.barycentric.data[i] = [bary.x as f32, bary.y as f32];
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::{Extrinsics, Intrinsics, Mesh};
+    use crate::rng::Rng;
+
+    /// Ray casting: every pixel's ray (undistorted exactly) against every triangle.
+    fn brute_force(camera: &Camera, objects: &[RenderObject]) -> (Plane<u8>, Plane<f32>) {
+        let (w, h) = (camera.width as usize, camera.height as usize);
+        let mut obj = Plane::filled(w, h, NO_OBJECT);
+        let mut depth = Plane::filled(w, h, f32::INFINITY);
+        for y in 0..h {
+            for x in 0..w {
+                let n = camera.intrinsics.unproject(DVec2::new(x as f64, y as f64));
+                let dir = DVec3::new(n.x, n.y, 1.0);
+                for (oi, o) in objects.iter().enumerate() {
+                    for f in o.faces {
+                        let [a, b, c] = f.map(|k| camera.to_camera(o.vertices[k as usize]));
+                        // Möller–Trumbore from the camera centre; t is the depth Z since dir.z = 1.
+                        let (e1, e2) = (b - a, c - a);
+                        let pv = dir.cross(e2);
+                        let det = e1.dot(pv);
+                        if det.abs() < 1e-12 {
+                            continue;
+                        }
+                        let tv = -a;
+                        let u = tv.dot(pv) / det;
+                        let qv = tv.cross(e1);
+                        let v = dir.dot(qv) / det;
+                        let t = e2.dot(qv) / det;
+                        if u >= 0.0
+                            && v >= 0.0
+                            && u + v <= 1.0
+                            && t > NEAR_MM
+                            && (t as f32) < *depth.get(x, y)
+                        {
+                            depth.set(x, y, t as f32);
+                            obj.set(x, y, oi as u8);
+                        }
+                    }
+                }
+            }
+        }
+        (obj, depth)
+    }
+
+    fn random_blob(rng: &mut Rng, center: DVec3, radius: f64) -> Mesh {
+        let s = crate::synth::anatomy::icosphere(2);
+        let axes = DVec3::new(
+            rng.range(0.6, 1.4),
+            rng.range(0.6, 1.4),
+            rng.range(0.6, 1.4),
+        ) * radius;
+        let bumps = [rng.unit_vector(), rng.unit_vector()];
+        let verts = s
+            .vertices
+            .iter()
+            .map(|v| {
+                let r = 1.0 + 0.2 * (3.0 * v.dot(bumps[0])).sin() * (2.0 * v.dot(bumps[1])).cos();
+                center + *v * axes * r
+            })
+            .collect();
+        Mesh::new(verts, s.faces)
+    }
+
+    fn scene(rng: &mut Rng, k1: f64) -> (Camera, Vec<Mesh>) {
+        let cam = Camera {
+            name: "t".into(),
+            width: 96,
+            height: 72,
+            intrinsics: Intrinsics {
+                k1,
+                k2: k1 * 0.3,
+                p1: k1 * 0.01,
+                ..Intrinsics::pinhole(90.0, 92.0, 47.3, 35.8)
+            },
+            extrinsics: Extrinsics {
+                rotation: crate::geometry::pose::rotation_from_vector(rng.unit_vector() * 0.05),
+                translation_mm: DVec3::new(-4.5, 0.0, 0.0),
+            },
+        };
+        let meshes = (0..3)
+            .map(|_| {
+                let c = DVec3::new(
+                    rng.range(-30.0, 30.0),
+                    rng.range(-20.0, 20.0),
+                    rng.range(90.0, 140.0),
+                );
+                let r = rng.range(10.0, 30.0);
+                random_blob(rng, c, r)
+            })
+            .collect();
+        (cam, meshes)
+    }
+
+    fn compare(k1: f64, seed: u64, allowed_mismatch_per_pixel_of_edge: f64) {
+        let mut rng = Rng::new(seed);
+        for _ in 0..4 {
+            let (cam, meshes) = scene(&mut rng, k1);
+            let objects: Vec<RenderObject> = meshes
+                .iter()
+                .map(|m| RenderObject {
+                    vertices: &m.vertices,
+                    faces: &m.faces,
+                })
+                .collect();
+            let fast = rasterize(&cam, &objects, &RasterOptions::default());
+            let (obj, depth) = brute_force(&cam, &objects);
+            let mut mismatch = 0;
+            let mut boundary = 0;
+            for i in 0..obj.data.len() {
+                let (x, y) = (i % obj.width, i / obj.width);
+                // Boundary pixels: any 4-neighbour differs in the brute-force object map.
+                let edge = [(1i64, 0i64), (-1, 0), (0, 1), (0, -1)]
+                    .iter()
+                    .any(|(dx, dy)| {
+                        let (nx, ny) = (x as i64 + dx, y as i64 + dy);
+                        nx >= 0
+                            && ny >= 0
+                            && (nx as usize) < obj.width
+                            && (ny as usize) < obj.height
+                            && *obj.get(nx as usize, ny as usize) != obj.data[i]
+                    });
+                boundary += edge as usize;
+                if fast.object.data[i] != obj.data[i] {
+                    mismatch += 1;
+                    assert!(
+                        edge,
+                        "interior pixel ({x},{y}) differs: {} vs {}",
+                        fast.object.data[i], obj.data[i]
+                    );
+                } else if obj.data[i] != NO_OBJECT && !edge {
+                    // Depth must be right to within half a pixel of position: allow half the
+                    // largest depth step to a neighbour (steep where the surface turns away).
+                    let step = [(1i64, 0i64), (-1, 0), (0, 1), (0, -1)]
+                        .iter()
+                        .filter_map(|(dx, dy)| {
+                            let (nx, ny) = (x as i64 + dx, y as i64 + dy);
+                            (nx >= 0
+                                && ny >= 0
+                                && (nx as usize) < obj.width
+                                && (ny as usize) < obj.height)
+                                .then(|| {
+                                    (depth.get(nx as usize, ny as usize) - depth.data[i]).abs()
+                                })
+                        })
+                        .fold(0.0f32, f32::max);
+                    let (a, b) = (fast.depth_mm.data[i], depth.data[i]);
+                    assert!(
+                        (a - b).abs() < 0.02 + 0.5 * step,
+                        "depth at ({x},{y}): {a} vs {b} (neighbour step {step})"
+                    );
+                }
+            }
+            assert!(
+                (mismatch as f64) <= allowed_mismatch_per_pixel_of_edge * boundary as f64,
+                "{mismatch} mismatches over {boundary} boundary pixels"
+            );
+            // The surface point behind a pixel lies on its ray.
+            for i in (0..obj.data.len()).step_by(7) {
+                if let Some(p) = fast.surface_point(&objects, i) {
+                    let px = cam.project(p).unwrap();
+                    let (x, y) = ((i % obj.width) as f64, (i / obj.width) as f64);
+                    assert!(
+                        (px - DVec2::new(x, y)).length() < 0.3,
+                        "surface point reprojects {px:?} for ({x},{y})"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn pinhole_raster_matches_ray_casting() {
+        compare(0.0, 61, 0.01);
+    }
+
+    #[test]
+    fn distorted_raster_matches_ray_casting() {
+        compare(-0.25, 62, 0.05);
+        compare(0.2, 63, 0.05);
+    }
+}

@@ -1,0 +1,195 @@
+//! Video frames of each camera: image sequences on disk (PNG, JPEG) behind a bounded cache of
+//! decoded frames, or frames held in memory (the built-in demo). Shared between threads.
+
+use super::template::PathTemplate;
+use crate::error::InputError;
+use image::RgbImage;
+use std::collections::{HashMap, VecDeque};
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+
+/// Decoded frames kept at most (across cameras): ~190 MB at 960×540, enough to scrub back and
+/// forth without decoding again.
+pub const DEFAULT_CACHE_FRAMES: usize = 128;
+
+/// Where one camera's frames come from.
+#[derive(Debug, Clone)]
+pub enum FrameSource {
+    Files {
+        root: PathBuf,
+        template: PathTemplate,
+        camera: String,
+    },
+    Memory(Arc<Vec<Arc<RgbImage>>>),
+}
+
+impl FrameSource {
+    /// The file of frame `t`, when frames are files.
+    pub fn path(&self, t: usize) -> Option<PathBuf> {
+        match self {
+            Self::Files {
+                root,
+                template,
+                camera,
+            } => Some(root.join(template.expand(t, camera, ""))),
+            Self::Memory(_) => None,
+        }
+    }
+}
+
+/// A least-recently-used cache of decoded frames, keyed by (camera, frame).
+#[derive(Debug)]
+pub struct FrameCache {
+    capacity: usize,
+    inner: Mutex<CacheInner>,
+}
+
+#[derive(Debug, Default)]
+struct CacheInner {
+    map: HashMap<(usize, usize), Arc<RgbImage>>,
+    order: VecDeque<(usize, usize)>,
+}
+
+impl FrameCache {
+    pub fn new(capacity: usize) -> Self {
+        Self {
+            capacity: capacity.max(1),
+            inner: Mutex::new(CacheInner::default()),
+        }
+    }
+
+    /// Frame `t` of camera `c` from `source`, decoding on a miss. Checks the size.
+    pub fn get(
+        &self,
+        c: usize,
+        t: usize,
+        source: &FrameSource,
+        size: (u32, u32),
+    ) -> Result<Arc<RgbImage>, InputError> {
+        let path = match source {
+            FrameSource::Memory(frames) => {
+                return frames
+                    .get(t)
+                    .cloned()
+                    .ok_or_else(|| InputError::new("demo", format!("frame {t} does not exist")));
+            }
+            FrameSource::Files { .. } => source.path(t).unwrap_or_default(),
+        };
+        if let Some(img) = self.lock().map.get(&(c, t)).cloned() {
+            return Ok(img);
+        }
+        let img = Arc::new(decode_frame(&path, size)?);
+        let mut inner = self.lock();
+        inner.map.insert((c, t), img.clone());
+        inner.order.retain(|k| *k != (c, t));
+        inner.order.push_back((c, t));
+        while inner.order.len() > self.capacity {
+            if let Some(old) = inner.order.pop_front() {
+                inner.map.remove(&old);
+            }
+        }
+        Ok(img)
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, CacheInner> {
+        // A panic elsewhere while holding the lock leaves a valid cache: recover it.
+        self.inner.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    pub fn len(&self) -> usize {
+        self.lock().map.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// Decodes a PNG or JPEG frame to RGB and checks its size against the camera's.
+pub fn decode_frame(path: &Path, size: (u32, u32)) -> Result<RgbImage, InputError> {
+    let img = image::ImageReader::open(path)
+        .map_err(|e| InputError::new(path, format!("cannot open frame: {e}")))?
+        .with_guessed_format()
+        .map_err(|e| InputError::new(path, format!("cannot read frame: {e}")))?
+        .decode()
+        .map_err(|e| {
+            InputError::new(
+                path,
+                format!("cannot decode frame (truncated or not an image?): {e}"),
+            )
+        })?;
+    if (img.width(), img.height()) != size {
+        return Err(InputError::new(
+            path,
+            format!(
+                "frame is {}×{} but the camera is {}×{}",
+                img.width(),
+                img.height(),
+                size.0,
+                size.1
+            ),
+        ));
+    }
+    Ok(img.into_rgb8())
+}
+
+/// Reads only the header: the frame exists, is an image, and has the camera's size.
+pub fn check_frame_header(path: &Path, size: (u32, u32)) -> Result<(), InputError> {
+    let dims = image::ImageReader::open(path)
+        .map_err(|e| InputError::new(path, format!("missing frame: {e}")))?
+        .with_guessed_format()
+        .map_err(|e| InputError::new(path, format!("cannot read frame: {e}")))?
+        .into_dimensions()
+        .map_err(|e| InputError::new(path, format!("not a readable image: {e}")))?;
+    if dims != size {
+        return Err(InputError::new(
+            path,
+            format!(
+                "frame is {}×{} but the camera is {}×{}",
+                dims.0, dims.1, size.0, size.1
+            ),
+        ));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cache_is_bounded_and_checks_sizes() {
+        let dir = std::env::temp_dir().join(format!("endofuse-frames-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        for t in 0..5 {
+            RgbImage::from_pixel(8, 6, image::Rgb([t as u8, 0, 0]))
+                .save(dir.join(format!("{t}.png")))
+                .unwrap();
+        }
+        let src = FrameSource::Files {
+            root: dir.clone(),
+            template: PathTemplate::parse("{frame}.png").unwrap(),
+            camera: "left".into(),
+        };
+        let cache = FrameCache::new(3);
+        for t in 0..5 {
+            assert_eq!(
+                cache.get(0, t, &src, (8, 6)).unwrap().get_pixel(0, 0).0[0],
+                t as u8
+            );
+        }
+        assert_eq!(cache.len(), 3);
+        let err = cache.get(0, 9, &src, (8, 6)).unwrap_err();
+        assert!(err.path.ends_with("9.png"));
+        assert!(
+            cache
+                .get(1, 1, &src, (9, 6))
+                .unwrap_err()
+                .problem
+                .contains("8×6 but the camera is 9×6")
+        );
+        std::fs::write(dir.join("bad.png"), b"\x89PNG\r\n\x1a\n\0\0\0\rIHDR").unwrap();
+        assert!(decode_frame(&dir.join("bad.png"), (8, 6)).is_err());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}

@@ -1,0 +1,100 @@
+//! Label PNGs (8-bit grey): ground truth, seeds and output masks. Reading accepts 8-bit grey,
+//! or RGB(A) whose channels are equal (some painting tools save that); anything else is an
+//! error naming the file.
+
+use crate::error::InputError;
+use crate::plane::{LabelImage, Plane};
+use image::{DynamicImage, GrayImage};
+use std::path::Path;
+
+pub fn read_label_png(path: &Path) -> Result<LabelImage, InputError> {
+    let img = image::ImageReader::open(path)
+        .map_err(|e| InputError::new(path, format!("cannot open label image: {e}")))?
+        .with_guessed_format()
+        .map_err(|e| InputError::new(path, format!("cannot read label image: {e}")))?
+        .decode()
+        .map_err(|e| InputError::new(path, format!("cannot decode label image: {e}")))?;
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    let data = match img {
+        DynamicImage::ImageLuma8(g) => g.into_raw(),
+        DynamicImage::ImageLumaA8(g) => g.pixels().map(|p| p.0[0]).collect(),
+        DynamicImage::ImageRgb8(rgb) => {
+            grey_from_channels(path, rgb.pixels().map(|p| [p.0[0], p.0[1], p.0[2]]))?
+        }
+        DynamicImage::ImageRgba8(rgba) => {
+            grey_from_channels(path, rgba.pixels().map(|p| [p.0[0], p.0[1], p.0[2]]))?
+        }
+        other => {
+            return Err(InputError::new(
+                path,
+                format!("label image must be 8-bit grey, found {:?}", other.color()),
+            ));
+        }
+    };
+    Ok(Plane {
+        width: w,
+        height: h,
+        data,
+    })
+}
+
+fn grey_from_channels(
+    path: &Path,
+    pixels: impl Iterator<Item = [u8; 3]>,
+) -> Result<Vec<u8>, InputError> {
+    pixels
+        .map(|[r, g, b]| {
+            if r == g && g == b {
+                Ok(r)
+            } else {
+                Err(InputError::new(
+                    path,
+                    "label image has colours; it must be 8-bit grey with one label value per pixel",
+                ))
+            }
+        })
+        .collect()
+}
+
+/// Writes an 8-bit grey PNG, creating parent folders.
+pub fn write_label_png(path: &Path, labels: &LabelImage) -> std::io::Result<()> {
+    if let Some(parent) = path.parent() {
+        std::fs::create_dir_all(parent)?;
+    }
+    let img = GrayImage::from_raw(
+        labels.width as u32,
+        labels.height as u32,
+        labels.data.clone(),
+    )
+    .ok_or_else(|| std::io::Error::other("label buffer size does not match its dimensions"))?;
+    img.save(path).map_err(std::io::Error::other)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn round_trip_and_refusals() {
+        let dir = std::env::temp_dir().join(format!("endofuse-labels-{}", std::process::id()));
+        let p = dir.join("a/b.png");
+        let img = Plane::from_vec(3, 2, vec![0, 1, 2, 255, 3, 0]).unwrap();
+        write_label_png(&p, &img).unwrap();
+        assert_eq!(read_label_png(&p).unwrap(), img);
+        let rgb = dir.join("rgb.png");
+        image::RgbImage::from_fn(2, 2, |x, _| image::Rgb([x as u8, 0, 0]))
+            .save(&rgb)
+            .unwrap();
+        assert!(
+            read_label_png(&rgb)
+                .unwrap_err()
+                .problem
+                .contains("colours")
+        );
+        let junk = dir.join("junk.png");
+        std::fs::write(&junk, b"\x89PNG\r\n\x1a\nnot really").unwrap();
+        assert!(read_label_png(&junk).is_err());
+        assert!(read_label_png(&dir.join("missing.png")).is_err());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}

@@ -1,0 +1,682 @@
+//! Scenes (CONTRACT §2): cameras, frames, structures with their meshes and joint shape model,
+//! seeds, ground truth and zoom changes. [`Scene::open`] reads a scene folder, its scene.json,
+//! or the word `demo`, and validates everything it can without decoding every frame; each
+//! problem is one [`InputError`] naming the file and what is wrong.
+
+pub mod format;
+pub mod frames;
+pub mod labels;
+pub mod template;
+pub mod trajectory;
+pub mod write;
+
+use crate::error::InputError;
+use crate::geometry::mesh_io::load_mesh;
+use crate::geometry::pose::is_rotation;
+use crate::geometry::{Affine, Camera, Extrinsics, Intrinsics, Mesh};
+use crate::plane::LabelImage;
+use crate::shape::{JointShapeModel, build_joint_model};
+use format::{FORMAT_V1, SceneFile};
+use frames::{FrameCache, FrameSource};
+use glam::{DMat3, DVec3};
+use image::RgbImage;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use template::PathTemplate;
+pub use trajectory::{Trajectory, TrajectoryFrame};
+
+/// Seed value meaning background or tools (CONTRACT §2); 0 means unpainted.
+pub const SEED_BACKGROUND: u8 = 255;
+pub const SEED_NONE: u8 = 0;
+
+/// One preoperative structure.
+#[derive(Debug, Clone)]
+pub struct Structure {
+    pub name: String,
+    pub label: u8,
+    /// False for hidden (e.g. endophytic) structures: no image term, drawn in the overlay.
+    pub visible: bool,
+    pub mesh: Mesh,
+    /// Vertex arrays of the catalog given in the scene (same order as the mesh), if any.
+    pub catalog: Option<Vec<Vec<DVec3>>>,
+    /// Where the mesh came from (for messages).
+    pub mesh_path: PathBuf,
+}
+
+/// Painted seeds: per camera, per frame, a label image (0 none, 255 background, else a label).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Seeds {
+    pub by_camera: Vec<BTreeMap<usize, LabelImage>>,
+}
+
+impl Seeds {
+    pub fn seeded_frames(&self) -> Vec<usize> {
+        let mut f: Vec<usize> = self
+            .by_camera
+            .iter()
+            .flat_map(|m| m.keys().copied())
+            .collect();
+        f.sort_unstable();
+        f.dedup();
+        f
+    }
+
+    /// Painted pixels per seed value, over all cameras and frames.
+    pub fn pixel_counts(&self) -> BTreeMap<u8, usize> {
+        let mut counts = BTreeMap::new();
+        for img in self.by_camera.iter().flat_map(|m| m.values()) {
+            for &v in &img.data {
+                if v != SEED_NONE {
+                    *counts.entry(v).or_insert(0) += 1;
+                }
+            }
+        }
+        counts
+    }
+}
+
+/// Ground truth a scene may carry.
+#[derive(Debug, Clone, Default)]
+pub struct GroundTruth {
+    /// Label images per camera and frame, read on demand.
+    pub labels: Option<PathTemplate>,
+    pub hidden: Option<PathTemplate>,
+    pub trajectory: Option<Trajectory>,
+    /// In-memory ground truth (the demo): `[camera][frame]`.
+    pub memory_labels: Option<Arc<Vec<Vec<LabelImage>>>>,
+}
+
+/// A loaded, validated scene.
+#[derive(Debug)]
+pub struct Scene {
+    /// Folder holding scene.json (None for in-memory scenes).
+    pub root: Option<PathBuf>,
+    /// How the user named it: the scene.json path, or "demo".
+    pub origin: String,
+    pub fps: f64,
+    pub frame_count: usize,
+    pub cameras: Vec<Camera>,
+    pub frame_sources: Vec<FrameSource>,
+    pub structures: Vec<Structure>,
+    pub shape: JointShapeModel,
+    pub initial_pose: Option<Affine>,
+    pub seeds: Seeds,
+    pub seeds_template: Option<PathTemplate>,
+    pub ground_truth: GroundTruth,
+    /// Inclusive frame ranges where the zoom changes.
+    pub zoom_changes: Vec<(usize, usize)>,
+    cache: FrameCache,
+}
+
+/// How much `Scene::open` checks of the frames.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FrameCheck {
+    /// Every frame exists and its header gives the camera's size (cheap).
+    Headers,
+    /// Every frame decodes completely (what `info` does).
+    Decode,
+}
+
+impl Scene {
+    /// Opens `demo`, a scene folder, or a scene.json.
+    pub fn open(spec: &str, check: FrameCheck) -> Result<Scene, InputError> {
+        if spec == "demo" {
+            return crate::synth::demo_scene();
+        }
+        let p = Path::new(spec);
+        let json = if p.is_dir() {
+            p.join("scene.json")
+        } else {
+            p.to_path_buf()
+        };
+        Self::load(&json, check)
+    }
+
+    /// Loads and validates a scene.json and everything it refers to.
+    pub fn load(json_path: &Path, check: FrameCheck) -> Result<Scene, InputError> {
+        let text = std::fs::read_to_string(json_path).map_err(|e| {
+            let what = if json_path.exists() {
+                format!("cannot read: {e}")
+            } else {
+                "no such scene (expected a scene folder, its scene.json, or 'demo')".into()
+            };
+            InputError::new(json_path, what)
+        })?;
+        let file: SceneFile = serde_json::from_str(&text)
+            .map_err(|e| InputError::new(json_path, format!("malformed scene: {e}")))?;
+        let root = json_path
+            .parent()
+            .map(Path::to_path_buf)
+            .unwrap_or_default();
+        Self::from_file(file, &root, json_path, check)
+    }
+
+    fn from_file(
+        file: SceneFile,
+        root: &Path,
+        json_path: &Path,
+        check: FrameCheck,
+    ) -> Result<Scene, InputError> {
+        let bad = |problem: String| InputError::new(json_path, problem);
+        if file.format != FORMAT_V1 {
+            return Err(bad(format!(
+                "unsupported format '{}' (this program reads '{FORMAT_V1}')",
+                file.format
+            )));
+        }
+        if file.frame_count <= 0 {
+            return Err(bad(format!(
+                "frame_count must be positive, got {}",
+                file.frame_count
+            )));
+        }
+        if !(file.fps.is_finite() && file.fps > 0.0) {
+            return Err(bad(format!("fps must be positive, got {}", file.fps)));
+        }
+        let frame_count = file.frame_count as usize;
+        if file.cameras.is_empty() {
+            return Err(bad("no cameras".into()));
+        }
+        let mut cameras = Vec::new();
+        let mut frame_sources = Vec::new();
+        for (i, c) in file.cameras.iter().enumerate() {
+            let (camera, template) = validate_camera(c, i).map_err(&bad)?;
+            if cameras.iter().any(|k: &Camera| k.name == camera.name) {
+                return Err(bad(format!("two cameras are named '{}'", camera.name)));
+            }
+            frame_sources.push(FrameSource::Files {
+                root: root.to_path_buf(),
+                template,
+                camera: camera.name.clone(),
+            });
+            cameras.push(camera);
+        }
+        if file.structures.is_empty() {
+            return Err(bad("no structures".into()));
+        }
+        let mut structures: Vec<Structure> = Vec::new();
+        for (i, s) in file.structures.iter().enumerate() {
+            let what = format!("structures[{i}] ('{}')", s.name);
+            check_name(&s.name).map_err(|p| bad(format!("{what}: {p}")))?;
+            if !(1..=254).contains(&s.label) {
+                return Err(bad(format!(
+                    "{what}: label {} is not allowed (1–254; 0 is background and 255 is reserved for background seeds)",
+                    s.label
+                )));
+            }
+            if let Some(other) = structures.iter().find(|o| o.label as i64 == s.label) {
+                return Err(bad(format!(
+                    "{what}: label {} is already used by '{}'",
+                    s.label, other.name
+                )));
+            }
+            if structures.iter().any(|o| o.name == s.name) {
+                return Err(bad(format!(
+                    "{what}: two structures are named '{}'",
+                    s.name
+                )));
+            }
+            let mesh_path = root.join(&s.mesh);
+            let mesh = load_mesh(&mesh_path)?;
+            let catalog = match &s.catalog {
+                Some(dir) => Some(load_catalog(&root.join(dir), &mesh)?),
+                None => None,
+            };
+            structures.push(Structure {
+                name: s.name.clone(),
+                label: s.label as u8,
+                visible: s.visible,
+                mesh,
+                catalog,
+                mesh_path,
+            });
+        }
+        if !structures.iter().any(|s| s.visible) {
+            return Err(bad(
+                "no visible structure: at least one must give an image term".into(),
+            ));
+        }
+        let initial_pose = match &file.initial_pose {
+            Some(p) => {
+                Some(validate_affine(&p.affine).map_err(|e| bad(format!("initial_pose: {e}")))?)
+            }
+            None => None,
+        };
+        let mut zoom_changes = Vec::new();
+        for &[a, b] in &file.zoom_changes {
+            if a < 0 || b < a || b as usize >= frame_count {
+                return Err(bad(format!(
+                    "zoom_changes: [{a}, {b}] is not an inclusive range inside 0..{}",
+                    frame_count - 1
+                )));
+            }
+            zoom_changes.push((a as usize, b as usize));
+        }
+        let shape = build_shape(&structures).map_err(bad)?;
+        let mut scene = Scene {
+            root: Some(root.to_path_buf()),
+            origin: json_path.display().to_string(),
+            fps: file.fps,
+            frame_count,
+            cameras,
+            frame_sources,
+            structures,
+            shape,
+            initial_pose,
+            seeds: Seeds::default(),
+            seeds_template: None,
+            ground_truth: GroundTruth::default(),
+            zoom_changes,
+            cache: FrameCache::new(frames::DEFAULT_CACHE_FRAMES),
+        };
+        scene.check_frames(check)?;
+        if let Some(t) = &file.seeds {
+            let template = PathTemplate::parse(t).map_err(|e| bad(format!("seeds: {e}")))?;
+            scene.seeds = scene.load_seeds(&template)?;
+            scene.seeds_template = Some(template);
+        }
+        if let Some(gt) = &file.ground_truth {
+            scene.ground_truth = scene.load_ground_truth(gt, json_path)?;
+        }
+        Ok(scene)
+    }
+
+    /// An in-memory scene (the demo): frames and ground truth already made.
+    #[allow(clippy::too_many_arguments)]
+    pub fn in_memory(
+        origin: &str,
+        fps: f64,
+        cameras: Vec<Camera>,
+        frames: Vec<Vec<Arc<RgbImage>>>,
+        structures: Vec<Structure>,
+        initial_pose: Option<Affine>,
+        seeds: Seeds,
+        ground_truth: GroundTruth,
+        zoom_changes: Vec<(usize, usize)>,
+    ) -> Result<Scene, String> {
+        let frame_count = frames.first().map(|f| f.len()).unwrap_or(0);
+        let shape = build_shape(&structures)?;
+        Ok(Scene {
+            root: None,
+            origin: origin.to_string(),
+            fps,
+            frame_count,
+            cameras,
+            frame_sources: frames
+                .into_iter()
+                .map(|f| FrameSource::Memory(Arc::new(f)))
+                .collect(),
+            structures,
+            shape,
+            initial_pose,
+            seeds,
+            seeds_template: None,
+            ground_truth,
+            zoom_changes,
+            cache: FrameCache::new(1),
+        })
+    }
+
+    /// Frame `t` of camera `c`, decoded (cached).
+    pub fn frame(&self, c: usize, t: usize) -> Result<Arc<RgbImage>, InputError> {
+        let cam = self
+            .cameras
+            .get(c)
+            .ok_or_else(|| InputError::new(&self.origin, format!("no camera {c}")))?;
+        let source = &self.frame_sources[c];
+        self.cache.get(c, t, source, (cam.width, cam.height))
+    }
+
+    /// Ground-truth labels of frame `t` in camera `c`, if the scene has them.
+    pub fn ground_truth_labels(
+        &self,
+        c: usize,
+        t: usize,
+    ) -> Option<Result<LabelImage, InputError>> {
+        if let Some(mem) = &self.ground_truth.memory_labels {
+            return mem.get(c).and_then(|f| f.get(t)).cloned().map(Ok);
+        }
+        let template = self.ground_truth.labels.as_ref()?;
+        let path = self
+            .root
+            .as_ref()?
+            .join(template.expand(t, &self.cameras[c].name, ""));
+        if !path.exists() {
+            return None;
+        }
+        Some(labels::read_label_png(&path).and_then(|img| self.check_label_size(&path, img, c)))
+    }
+
+    /// Which frames have ground-truth labels for every camera.
+    pub fn ground_truth_frames(&self) -> Vec<usize> {
+        if let Some(mem) = &self.ground_truth.memory_labels {
+            return (0..mem.first().map(|v| v.len()).unwrap_or(0)).collect();
+        }
+        let (Some(template), Some(root)) = (&self.ground_truth.labels, &self.root) else {
+            return Vec::new();
+        };
+        (0..self.frame_count)
+            .filter(|&t| {
+                self.cameras
+                    .iter()
+                    .all(|c| root.join(template.expand(t, &c.name, "")).exists())
+            })
+            .collect()
+    }
+
+    fn check_label_size(
+        &self,
+        path: &Path,
+        img: LabelImage,
+        c: usize,
+    ) -> Result<LabelImage, InputError> {
+        let cam = &self.cameras[c];
+        if img.width != cam.width as usize || img.height != cam.height as usize {
+            return Err(InputError::new(
+                path,
+                format!(
+                    "label image is {}×{} but camera '{}' is {}×{}",
+                    img.width, img.height, cam.name, cam.width, cam.height
+                ),
+            ));
+        }
+        Ok(img)
+    }
+
+    fn check_frames(&self, check: FrameCheck) -> Result<(), InputError> {
+        for (c, cam) in self.cameras.iter().enumerate() {
+            let source = &self.frame_sources[c];
+            for t in 0..self.frame_count {
+                let Some(path) = source.path(t) else { continue };
+                match check {
+                    FrameCheck::Headers => {
+                        frames::check_frame_header(&path, (cam.width, cam.height))?
+                    }
+                    FrameCheck::Decode => {
+                        frames::decode_frame(&path, (cam.width, cam.height))?;
+                        if t % 20 == 19 || t + 1 == self.frame_count {
+                            eprint!(
+                                "\rchecking frames of '{}': {}/{}",
+                                cam.name,
+                                t + 1,
+                                self.frame_count
+                            );
+                        }
+                    }
+                }
+            }
+            if check == FrameCheck::Decode {
+                eprintln!();
+            }
+        }
+        Ok(())
+    }
+
+    fn load_seeds(&self, template: &PathTemplate) -> Result<Seeds, InputError> {
+        let root = self.root.clone().unwrap_or_default();
+        let mut seeds = Seeds {
+            by_camera: vec![BTreeMap::new(); self.cameras.len()],
+        };
+        for (c, cam) in self.cameras.iter().enumerate() {
+            for t in 0..self.frame_count {
+                let path = root.join(template.expand(t, &cam.name, ""));
+                if !path.exists() {
+                    continue;
+                }
+                let img = labels::read_label_png(&path)
+                    .and_then(|img| self.check_label_size(&path, img, c))?;
+                self.check_seed_values(&path, &img)?;
+                seeds.by_camera[c].insert(t, img);
+            }
+        }
+        Ok(seeds)
+    }
+
+    /// Every seed value is 0, 255 or a visible structure's label.
+    pub fn check_seed_values(&self, path: &Path, img: &LabelImage) -> Result<(), InputError> {
+        let mut seen = [false; 256];
+        for &v in &img.data {
+            seen[v as usize] = true;
+        }
+        for v in 1..255u8 {
+            if !seen[v as usize] {
+                continue;
+            }
+            match self.structures.iter().find(|s| s.label == v) {
+                None => {
+                    return Err(InputError::new(
+                        path,
+                        format!(
+                            "seed value {v} is no structure's label (use 255 for background, 0 for unpainted)"
+                        ),
+                    ));
+                }
+                Some(s) if !s.visible => {
+                    return Err(InputError::new(
+                        path,
+                        format!(
+                            "seeds paint the hidden structure '{}' (label {v}), which cannot be seen in the images",
+                            s.name
+                        ),
+                    ));
+                }
+                _ => {}
+            }
+        }
+        Ok(())
+    }
+
+    fn load_ground_truth(
+        &self,
+        gt: &format::GroundTruthEntry,
+        json_path: &Path,
+    ) -> Result<GroundTruth, InputError> {
+        let bad = |p: String| InputError::new(json_path, p);
+        let root = self.root.clone().unwrap_or_default();
+        let labels = gt
+            .labels
+            .as_deref()
+            .map(PathTemplate::parse)
+            .transpose()
+            .map_err(|e| bad(format!("ground_truth.labels: {e}")))?;
+        let hidden = PathTemplate::parse(
+            gt.hidden
+                .as_deref()
+                .unwrap_or(format::DEFAULT_HIDDEN_TEMPLATE),
+        )
+        .map_err(|e| bad(format!("ground_truth.hidden: {e}")))?;
+        let trajectory = match &gt.trajectory {
+            Some(rel) => {
+                let path = root.join(rel);
+                let text = std::fs::read_to_string(&path).map_err(|e| {
+                    InputError::new(&path, format!("cannot read ground-truth trajectory: {e}"))
+                })?;
+                let traj: Trajectory = serde_json::from_str(&text)
+                    .map_err(|e| InputError::new(&path, format!("malformed trajectory: {e}")))?;
+                traj.validate(self.frame_count, self.cameras.len())
+                    .map_err(|e| InputError::new(&path, e))?;
+                Some(traj)
+            }
+            None => None,
+        };
+        Ok(GroundTruth {
+            labels,
+            hidden: Some(hidden),
+            trajectory,
+            memory_labels: None,
+        })
+    }
+
+    pub fn visible_structures(&self) -> impl Iterator<Item = (usize, &Structure)> {
+        self.structures
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| s.visible)
+    }
+
+    pub fn structure_by_label(&self, label: u8) -> Option<&Structure> {
+        self.structures.iter().find(|s| s.label == label)
+    }
+
+    /// Is frame `t` inside a marked zoom change?
+    pub fn in_zoom_change(&self, t: usize) -> bool {
+        self.zoom_changes.iter().any(|&(a, b)| (a..=b).contains(&t))
+    }
+}
+
+fn check_name(name: &str) -> Result<(), String> {
+    if name.is_empty()
+        || name.len() > 64
+        || !name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+        || name == "background"
+    {
+        return Err(format!(
+            "name '{name}' must be 1–64 letters, digits, '_' or '-' (and not 'background'): it names output folders"
+        ));
+    }
+    Ok(())
+}
+
+fn validate_camera(c: &format::CameraEntry, i: usize) -> Result<(Camera, PathTemplate), String> {
+    let what = format!("cameras[{i}] ('{}')", c.name);
+    check_name(&c.name).map_err(|p| format!("{what}: {p}"))?;
+    if c.width <= 0 || c.height <= 0 || c.width > 16384 || c.height > 16384 {
+        return Err(format!(
+            "{what}: image size {}×{} must be positive (and at most 16384)",
+            c.width, c.height
+        ));
+    }
+    let nums = [c.fx, c.fy, c.cx, c.cy, c.k1, c.k2, c.p1, c.p2];
+    if nums.iter().any(|v| !v.is_finite()) {
+        return Err(format!("{what}: intrinsics must be finite numbers"));
+    }
+    if c.fx <= 0.0 || c.fy <= 0.0 {
+        return Err(format!(
+            "{what}: focal lengths must be positive, got fx={} fy={}",
+            c.fx, c.fy
+        ));
+    }
+    let r = DMat3::from_cols(
+        DVec3::new(c.rotation[0][0], c.rotation[1][0], c.rotation[2][0]),
+        DVec3::new(c.rotation[0][1], c.rotation[1][1], c.rotation[2][1]),
+        DVec3::new(c.rotation[0][2], c.rotation[1][2], c.rotation[2][2]),
+    );
+    if !is_rotation(r, 1e-3) {
+        return Err(format!(
+            "{what}: 'rotation' is not a rotation matrix (rows must be orthonormal with determinant +1)"
+        ));
+    }
+    let t = DVec3::from_array(c.translation);
+    if !t.is_finite() {
+        return Err(format!("{what}: 'translation' must be finite"));
+    }
+    let template = PathTemplate::parse(&c.frames).map_err(|e| format!("{what}: frames: {e}"))?;
+    if !template.uses_frame() {
+        return Err(format!(
+            "{what}: frames template '{}' has no {{frame}} placeholder",
+            c.frames
+        ));
+    }
+    Ok((
+        Camera {
+            name: c.name.clone(),
+            width: c.width as u32,
+            height: c.height as u32,
+            intrinsics: Intrinsics {
+                fx: c.fx,
+                fy: c.fy,
+                cx: c.cx,
+                cy: c.cy,
+                k1: c.k1,
+                k2: c.k2,
+                p1: c.p1,
+                p2: c.p2,
+            },
+            extrinsics: Extrinsics {
+                rotation: r,
+                translation_mm: t,
+            },
+        },
+        template,
+    ))
+}
+
+pub fn validate_affine(q: &[f64]) -> Result<Affine, String> {
+    if q.len() != 12 {
+        return Err(format!(
+            "'affine' needs 12 numbers (q1…q12 of eq. 2), got {}",
+            q.len()
+        ));
+    }
+    let mut a = Affine::IDENTITY;
+    a.q.copy_from_slice(q);
+    if !a.is_finite() {
+        return Err("'affine' has a non-finite number".into());
+    }
+    let det = a.linear().determinant();
+    if det <= 1e-9 {
+        return Err(format!(
+            "'affine' linear part has determinant {det:.3e}: it must preserve orientation and not collapse the model"
+        ));
+    }
+    Ok(a)
+}
+
+fn load_catalog(dir: &Path, mesh: &Mesh) -> Result<Vec<Vec<DVec3>>, InputError> {
+    let entries = std::fs::read_dir(dir)
+        .map_err(|e| InputError::new(dir, format!("cannot read catalog folder: {e}")))?;
+    let mut files: Vec<PathBuf> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            p.extension()
+                .and_then(|e| e.to_str())
+                .is_some_and(|e| matches!(e.to_ascii_lowercase().as_str(), "obj" | "stl" | "ply"))
+        })
+        .collect();
+    files.sort();
+    if files.is_empty() {
+        return Err(InputError::new(
+            dir,
+            "catalog folder holds no meshes (.obj, .stl, .ply)",
+        ));
+    }
+    files
+        .iter()
+        .map(|f| {
+            let m = load_mesh(f)?;
+            if m.vertices.len() != mesh.vertices.len() {
+                return Err(InputError::new(
+                    f,
+                    format!("catalog mesh has {} vertices but the structure's mesh has {} (catalogs need the same vertices in the same order)", m.vertices.len(), mesh.vertices.len()),
+                ));
+            }
+            Ok(m.vertices)
+        })
+        .collect()
+}
+
+/// The joint shape model; the anchor (organ) is the largest visible structure.
+fn build_shape(structures: &[Structure]) -> Result<JointShapeModel, String> {
+    let meshes: Vec<&Mesh> = structures.iter().map(|s| &s.mesh).collect();
+    let catalogs: Vec<Option<Vec<Vec<DVec3>>>> =
+        structures.iter().map(|s| s.catalog.clone()).collect();
+    let anchor = structures
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| s.visible)
+        .max_by(|a, b| {
+            let size = |s: &Structure| {
+                s.mesh
+                    .bounding_box()
+                    .map(|(lo, hi)| (hi - lo).length())
+                    .unwrap_or(0.0)
+            };
+            size(a.1).total_cmp(&size(b.1))
+        })
+        .map(|(i, _)| i)
+        .unwrap_or(0);
+    build_joint_model(&meshes, &catalogs, anchor)
+}

@@ -1,0 +1,311 @@
+//! Synthetic stereo endoscopic phantoms with ground truth: `endofuse synth` writes one as a
+//! scene folder (CONTRACT §2), and the built-in demo is the same generator run in memory.
+
+pub mod anatomy;
+pub mod phantom;
+pub mod seeds;
+pub mod texture;
+
+use crate::error::{Error, InputError};
+use crate::geometry::mesh_io::write_obj;
+use crate::plane::LabelImage;
+use crate::rng::Rng;
+use crate::scene::format::{
+    CameraEntry, FORMAT_V1, GroundTruthEntry, InitialPoseEntry, SceneFile, StructureEntry,
+};
+use crate::scene::write::{write_json_atomic, write_labels, write_rgb};
+use crate::scene::{GroundTruth, Scene, Seeds, Structure, Trajectory};
+use phantom::{FrameTruth, Phantom};
+use rayon::prelude::*;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+/// How the phantom is made (the `synth` flags).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SynthOptions {
+    pub frames: usize,
+    pub seed: u64,
+    /// Standard deviation of additive Gaussian noise on intensities in [0, 1].
+    pub noise: f64,
+    pub width: u32,
+    pub height: u32,
+    pub views: usize,
+    pub tools: bool,
+    pub zoom: bool,
+    pub smoke: bool,
+    /// Frames that get seed strokes (the first three, as a user would).
+    pub seeded_frames: usize,
+    /// How far `initial_pose` is from the truth.
+    pub initial_offset_mm: f64,
+    pub initial_offset_deg: f64,
+}
+
+impl Default for SynthOptions {
+    fn default() -> Self {
+        Self {
+            frames: 30,
+            seed: 1,
+            noise: 0.01,
+            width: 960,
+            height: 540,
+            views: 2,
+            tools: true,
+            zoom: true,
+            smoke: true,
+            seeded_frames: 3,
+            initial_offset_mm: 5.0,
+            initial_offset_deg: 5.0,
+        }
+    }
+}
+
+impl SynthOptions {
+    /// Refuses options that cannot make a scene.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.frames == 0 || self.frames > 100_000 {
+            return Err(format!(
+                "--frames must be between 1 and 100000, got {}",
+                self.frames
+            ));
+        }
+        if !(16..=8192).contains(&self.width) || !(16..=8192).contains(&self.height) {
+            return Err(format!(
+                "--width/--height must be between 16 and 8192, got {}×{}",
+                self.width, self.height
+            ));
+        }
+        if self.views == 0 || self.views > 16 {
+            return Err(format!(
+                "--views must be between 1 and 16, got {}",
+                self.views
+            ));
+        }
+        if !(self.noise.is_finite() && (0.0..=1.0).contains(&self.noise)) {
+            return Err(format!(
+                "--noise must be between 0 and 1 (intensities are in [0, 1]), got {}",
+                self.noise
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// The seed strokes of frame `t` (empty when `t` is not a seeded frame).
+fn frame_seeds(phantom: &Phantom, truth: &FrameTruth, t: usize) -> Option<Vec<LabelImage>> {
+    if t >= phantom.options.seeded_frames {
+        return None;
+    }
+    let visible: Vec<u8> = phantom
+        .structures
+        .iter()
+        .filter(|s| s.2)
+        .map(|s| s.1)
+        .collect();
+    Some(
+        truth
+            .labels
+            .iter()
+            .zip(&truth.tools)
+            .enumerate()
+            .map(|(m, (labels, tools))| {
+                let mut rng = Rng::fork(phantom.options.seed ^ 0x5EED_5, (t * 64 + m) as u64);
+                seeds::seeds_for_view(labels, tools, &visible, &mut rng)
+            })
+            .collect(),
+    )
+}
+
+/// Writes a phantom scene into `dir`; `progress(done, total)` is called as frames finish.
+pub fn write_scene(
+    dir: &Path,
+    options: &SynthOptions,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<(), Error> {
+    options.validate().map_err(|p| InputError::new(dir, p))?;
+    let phantom = Phantom::new(options.clone());
+    let cams0 = phantom.initial_cameras();
+    let wrap = |path: PathBuf| {
+        move |source| Error::Write {
+            path: path.clone(),
+            source,
+        }
+    };
+    std::fs::create_dir_all(dir.join("meshes")).map_err(wrap(dir.to_path_buf()))?;
+    for (name, _, _, mesh) in &phantom.structures {
+        let p = dir.join(format!("meshes/{name}.obj"));
+        write_obj(&p, mesh).map_err(wrap(p.clone()))?;
+    }
+    let done = AtomicUsize::new(0);
+    let frames: Vec<_> = (0..options.frames)
+        .into_par_iter()
+        .map(|t| -> Result<_, Error> {
+            let truth = phantom.render(t);
+            for (m, cam) in cams0.iter().enumerate() {
+                write_rgb(
+                    &dir.join(format!("{}/{t:06}.png", cam.name)),
+                    &truth.images[m],
+                )?;
+                write_labels(
+                    &dir.join(format!("gt/{}/{t:06}.png", cam.name)),
+                    &truth.labels[m],
+                )?;
+                for (name, masks) in &truth.hidden {
+                    write_labels(
+                        &dir.join(format!("gt/hidden/{name}/{}/{t:06}.png", cam.name)),
+                        &masks[m].map(|&b| if b { 255 } else { 0 }),
+                    )?;
+                }
+            }
+            if let Some(seeds) = frame_seeds(&phantom, &truth, t) {
+                for (m, cam) in cams0.iter().enumerate() {
+                    write_labels(
+                        &dir.join(format!("seeds/{}/{t:06}.png", cam.name)),
+                        &seeds[m],
+                    )?;
+                }
+            }
+            progress(done.fetch_add(1, Ordering::Relaxed) + 1, options.frames);
+            Ok(truth.trajectory)
+        })
+        .collect::<Result<_, _>>()?;
+    write_json_atomic(&dir.join("gt/trajectory.json"), &Trajectory { frames })?;
+    let file = SceneFile {
+        format: FORMAT_V1.into(),
+        fps: 30.0,
+        frame_count: options.frames as i64,
+        cameras: cams0
+            .iter()
+            .map(|c| {
+                let i = &c.intrinsics;
+                let r = c.extrinsics.rotation;
+                CameraEntry {
+                    name: c.name.clone(),
+                    frames: format!("{}/{{frame:06}}.png", c.name),
+                    width: c.width as i64,
+                    height: c.height as i64,
+                    fx: i.fx,
+                    fy: i.fy,
+                    cx: i.cx,
+                    cy: i.cy,
+                    k1: i.k1,
+                    k2: i.k2,
+                    p1: i.p1,
+                    p2: i.p2,
+                    rotation: [0, 1, 2].map(|row| [r.x_axis[row], r.y_axis[row], r.z_axis[row]]),
+                    translation: c.extrinsics.translation_mm.to_array(),
+                }
+            })
+            .collect(),
+        structures: phantom
+            .structures
+            .iter()
+            .map(|(name, label, visible, _)| StructureEntry {
+                name: name.to_string(),
+                label: *label as i64,
+                visible: *visible,
+                mesh: format!("meshes/{name}.obj"),
+                catalog: None,
+            })
+            .collect(),
+        initial_pose: Some(InitialPoseEntry {
+            affine: phantom
+                .perturbed_initial_pose(options.initial_offset_mm, options.initial_offset_deg)
+                .q
+                .to_vec(),
+        }),
+        seeds: Some("seeds/{camera}/{frame:06}.png".into()),
+        ground_truth: Some(GroundTruthEntry {
+            labels: Some("gt/{camera}/{frame:06}.png".into()),
+            trajectory: Some("gt/trajectory.json".into()),
+            hidden: None,
+        }),
+        zoom_changes: phantom
+            .zoom_range
+            .map(|(a, b)| vec![[a as i64, b as i64]])
+            .unwrap_or_default(),
+    };
+    write_json_atomic(&dir.join("scene.json"), &file)
+}
+
+/// The demo's options: small enough to make in a couple of seconds when the app opens.
+pub fn demo_options() -> SynthOptions {
+    SynthOptions {
+        frames: 40,
+        seed: 7,
+        width: 480,
+        height: 270,
+        ..SynthOptions::default()
+    }
+}
+
+/// Builds a phantom scene in memory (the built-in demo, and tests).
+pub fn memory_scene(options: &SynthOptions) -> Result<Scene, InputError> {
+    options.validate().map_err(|p| InputError::new("demo", p))?;
+    let phantom = Phantom::new(options.clone());
+    let truths: Vec<FrameTruth> = (0..options.frames)
+        .into_par_iter()
+        .map(|t| phantom.render(t))
+        .collect();
+    let cams0 = phantom.initial_cameras();
+    let views = cams0.len();
+    let mut seeds = Seeds {
+        by_camera: vec![BTreeMap::new(); views],
+    };
+    for (t, truth) in truths.iter().enumerate() {
+        if let Some(s) = frame_seeds(&phantom, truth, t) {
+            for (m, img) in s.into_iter().enumerate() {
+                seeds.by_camera[m].insert(t, img);
+            }
+        }
+    }
+    let frames: Vec<Vec<Arc<image::RgbImage>>> = (0..views)
+        .map(|m| {
+            truths
+                .iter()
+                .map(|tr| Arc::new(tr.images[m].clone()))
+                .collect()
+        })
+        .collect();
+    let labels: Vec<Vec<LabelImage>> = (0..views)
+        .map(|m| truths.iter().map(|tr| tr.labels[m].clone()).collect())
+        .collect();
+    let structures = phantom
+        .structures
+        .iter()
+        .map(|(name, label, visible, mesh)| Structure {
+            name: name.to_string(),
+            label: *label,
+            visible: *visible,
+            mesh: mesh.clone(),
+            catalog: None,
+            mesh_path: PathBuf::from(format!("demo/meshes/{name}.obj")),
+        })
+        .collect();
+    let ground_truth = GroundTruth {
+        labels: None,
+        hidden: None,
+        trajectory: Some(Trajectory {
+            frames: truths.iter().map(|t| t.trajectory.clone()).collect(),
+        }),
+        memory_labels: Some(Arc::new(labels)),
+    };
+    Scene::in_memory(
+        "demo",
+        30.0,
+        cams0,
+        frames,
+        structures,
+        Some(phantom.perturbed_initial_pose(options.initial_offset_mm, options.initial_offset_deg)),
+        seeds,
+        ground_truth,
+        phantom.zoom_range.into_iter().collect(),
+    )
+    .map_err(|p| InputError::new("demo", p))
+}
+
+/// The built-in demo scene.
+pub fn demo_scene() -> Result<Scene, InputError> {
+    memory_scene(&demo_options())
+}
