@@ -29,9 +29,8 @@ pub fn summary(scene: &Scene) -> String {
         s.push('\n');
     }
     let _ = writeln!(s, "structures ({}):", scene.structures.len());
-    for (i, st) in scene.structures.iter().enumerate() {
-        let (first, count) = scene.shape.parts[i];
-        let _ = first;
+    for st in &scene.structures {
+        let count = st.mesh.vertices.len();
         let catalog = match &st.catalog {
             Some(c) => format!("catalog of {} shapes", c.len()),
             None => "no catalog".into(),
@@ -62,7 +61,7 @@ pub fn summary(scene: &Scene) -> String {
         .collect();
     let _ = writeln!(
         s,
-        "shape model: joint over {} structures, {} shapes {source}; {} PCA modes explain {:.1}% of the variance (σ mm: {}{})",
+        "shape model: joint over {} structures, {} shapes {source}; {} PCA modes explain {:.1}% of the variance (1σ moves a vertex {}{} mm RMS)",
         scene.structures.len(),
         pca.sample_count,
         pca.mode_count(),

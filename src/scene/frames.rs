@@ -105,8 +105,17 @@ impl FrameCache {
     }
 }
 
+fn missing(path: &Path) -> Result<(), InputError> {
+    if path.is_file() {
+        Ok(())
+    } else {
+        Err(InputError::new(path, "missing frame (the camera's frames template names it, and the scene's frame_count includes it)"))
+    }
+}
+
 /// Decodes a PNG or JPEG frame to RGB and checks its size against the camera's.
 pub fn decode_frame(path: &Path, size: (u32, u32)) -> Result<RgbImage, InputError> {
+    missing(path)?;
     let img = image::ImageReader::open(path)
         .map_err(|e| InputError::new(path, format!("cannot open frame: {e}")))?
         .with_guessed_format()
@@ -135,6 +144,7 @@ pub fn decode_frame(path: &Path, size: (u32, u32)) -> Result<RgbImage, InputErro
 
 /// Reads only the header: the frame exists, is an image, and has the camera's size.
 pub fn check_frame_header(path: &Path, size: (u32, u32)) -> Result<(), InputError> {
+    missing(path)?;
     let dims = image::ImageReader::open(path)
         .map_err(|e| InputError::new(path, format!("missing frame: {e}")))?
         .with_guessed_format()

@@ -50,6 +50,24 @@ impl Default for DeformationSpread {
     }
 }
 
+/// Half-length of the organ the default spread is made for (an adult kidney), mm.
+pub const REFERENCE_HALF_LENGTH_MM: f64 = 52.0;
+
+impl DeformationSpread {
+    /// The same relative deformation for an organ of another size: amplitudes and radii scale
+    /// with the organ's half-length.
+    pub fn scaled_to(&self, organ: &Mesh) -> Self {
+        let half = organ.bounding_box().map(|(lo, hi)| 0.5 * (hi - lo).max_element()).unwrap_or(REFERENCE_HALF_LENGTH_MM);
+        let k = if half > 0.0 { half / REFERENCE_HALF_LENGTH_MM } else { 1.0 };
+        Self {
+            forces: self.forces,
+            amplitude_mm: (self.amplitude_mm.0 * k, self.amplitude_mm.1 * k),
+            radius_mm: (self.radius_mm.0 * k, self.radius_mm.1 * k),
+            bend_mm: self.bend_mm * k,
+        }
+    }
+}
+
 impl DeformationField {
     pub fn displacement(&self, p: DVec3) -> DVec3 {
         let mut d = DVec3::ZERO;

@@ -82,9 +82,9 @@ pub fn albedo(material: Material, p: DVec3) -> (Vec3, f32, f32) {
         Material::Fat => {
             let fat = Vec3::new(0.86, 0.70, 0.34);
             let tissue = Vec3::new(0.66, 0.36, 0.28);
-            let m = ((fbm(p / 25.0, 4, 31) + 0.1) * 2.5).clamp(0.0, 1.0) as f32;
+            let m = ((fbm(p / 25.0, 4, 31) + 0.35) * 2.5).clamp(0.0, 1.0) as f32;
             let lobules = 0.9 + 0.2 * fbm(p / 3.0, 3, 33) as f32;
-            let v = vessels(p / 35.0, 0.05, 32) as f32;
+            let v = vessels(p / 35.0, 0.035, 32) as f32;
             (
                 (tissue.lerp(fat, m) * lobules).lerp(Vec3::new(0.50, 0.07, 0.06), 0.8 * v),
                 0.18,
