@@ -5,6 +5,7 @@
 pub mod error;
 pub mod geometry;
 pub mod info;
+pub mod overlay;
 pub mod plane;
 pub mod render;
 pub mod rng;

@@ -1,0 +1,88 @@
+//! CPU compositing of labels over a frame: translucent fills with crisp contours for visible
+//! structures, a dashed outline with a faint fill for hidden ones, and seed strokes. Used for
+//! the README's ground-truth picture and for exported overlay PNGs; the app draws its live
+//! overlay on the GPU with the same colours.
+
+use crate::plane::{LabelImage, Mask};
+use crate::scene::{SEED_BACKGROUND, SEED_NONE};
+use image::{Rgb, RgbImage};
+
+/// Colour of structure number `index` (scene order), and of background seeds.
+pub fn structure_colour(index: usize) -> [u8; 3] {
+    const PALETTE: [[u8; 3]; 6] = [[60, 220, 90], [255, 210, 30], [235, 60, 235], [40, 200, 255], [255, 120, 40], [180, 140, 255]];
+    PALETTE[index % PALETTE.len()]
+}
+
+pub const BACKGROUND_SEED_COLOUR: [u8; 3] = [40, 110, 255];
+
+fn blend(dst: &mut Rgb<u8>, c: [u8; 3], alpha: f32) {
+    for k in 0..3 {
+        dst.0[k] = (dst.0[k] as f32 * (1.0 - alpha) + c[k] as f32 * alpha).round() as u8;
+    }
+}
+
+fn is_edge(w: usize, h: usize, x: usize, y: usize, inside: impl Fn(usize, usize) -> bool) -> bool {
+    let me = inside(x, y);
+    (x > 0 && inside(x - 1, y) != me) || (y > 0 && inside(x, y - 1) != me) || (x + 1 < w && inside(x + 1, y) != me) || (y + 1 < h && inside(x, y + 1) != me)
+}
+
+/// Fills and outlines each label of `labels` (`labels_to_index` maps a label to its colour
+/// index) with opacity `alpha`.
+pub fn draw_labels(img: &mut RgbImage, labels: &LabelImage, labels_to_index: &dyn Fn(u8) -> Option<usize>, alpha: f32) {
+    let (w, h) = (labels.width, labels.height);
+    for y in 0..h {
+        for x in 0..w {
+            let l = *labels.get(x, y);
+            let Some(i) = (l != 0).then(|| labels_to_index(l)).flatten() else { continue };
+            let edge = is_edge(w, h, x, y, |a, b| *labels.get(a, b) == l);
+            blend(img.get_pixel_mut(x as u32, y as u32), structure_colour(i), if edge { 1.0 } else { alpha });
+        }
+    }
+}
+
+/// A hidden structure: dashed outline and a faint fill, drawn through whatever covers it.
+pub fn draw_hidden(img: &mut RgbImage, mask: &Mask, colour_index: usize) {
+    let (w, h) = (mask.width, mask.height);
+    for y in 0..h {
+        for x in 0..w {
+            if !*mask.get(x, y) {
+                continue;
+            }
+            let edge = is_edge(w, h, x, y, |a, b| *mask.get(a, b));
+            let dash = ((x + y) / 5) % 2 == 0;
+            let c = structure_colour(colour_index);
+            blend(img.get_pixel_mut(x as u32, y as u32), c, if edge && dash { 1.0 } else if edge { 0.3 } else { 0.18 });
+        }
+    }
+}
+
+/// Seed strokes, opaque.
+pub fn draw_seeds(img: &mut RgbImage, seeds: &LabelImage, labels_to_index: &dyn Fn(u8) -> Option<usize>) {
+    for (i, &v) in seeds.data.iter().enumerate() {
+        let c = match v {
+            SEED_NONE => continue,
+            SEED_BACKGROUND => BACKGROUND_SEED_COLOUR,
+            l => match labels_to_index(l) {
+                Some(k) => structure_colour(k),
+                None => continue,
+            },
+        };
+        let (x, y) = ((i % seeds.width) as u32, (i / seeds.width) as u32);
+        if x < img.width() && y < img.height() {
+            blend(img.get_pixel_mut(x, y), c, 0.9);
+        }
+    }
+}
+
+/// Tiles same-sized images into a grid of `columns`.
+pub fn tile(images: &[RgbImage], columns: usize) -> RgbImage {
+    let Some(first) = images.first() else { return RgbImage::new(1, 1) };
+    let (w, h) = (first.width(), first.height());
+    let rows = images.len().div_ceil(columns.max(1)) as u32;
+    let mut out = RgbImage::new(w * columns as u32, h * rows);
+    for (i, img) in images.iter().enumerate() {
+        let (cx, cy) = ((i % columns) as u32 * w, (i / columns) as u32 * h);
+        image::imageops::overlay(&mut out, img, cx as i64, cy as i64);
+    }
+    out
+}
