@@ -9,7 +9,14 @@ use image::{Rgb, RgbImage};
 
 /// Colour of structure number `index` (scene order), and of background seeds.
 pub fn structure_colour(index: usize) -> [u8; 3] {
-    const PALETTE: [[u8; 3]; 6] = [[60, 220, 90], [255, 210, 30], [235, 60, 235], [40, 200, 255], [255, 120, 40], [180, 140, 255]];
+    const PALETTE: [[u8; 3]; 6] = [
+        [60, 220, 90],
+        [255, 210, 30],
+        [235, 60, 235],
+        [40, 200, 255],
+        [255, 120, 40],
+        [180, 140, 255],
+    ];
     PALETTE[index % PALETTE.len()]
 }
 
@@ -23,19 +30,33 @@ fn blend(dst: &mut Rgb<u8>, c: [u8; 3], alpha: f32) {
 
 fn is_edge(w: usize, h: usize, x: usize, y: usize, inside: impl Fn(usize, usize) -> bool) -> bool {
     let me = inside(x, y);
-    (x > 0 && inside(x - 1, y) != me) || (y > 0 && inside(x, y - 1) != me) || (x + 1 < w && inside(x + 1, y) != me) || (y + 1 < h && inside(x, y + 1) != me)
+    (x > 0 && inside(x - 1, y) != me)
+        || (y > 0 && inside(x, y - 1) != me)
+        || (x + 1 < w && inside(x + 1, y) != me)
+        || (y + 1 < h && inside(x, y + 1) != me)
 }
 
 /// Fills and outlines each label of `labels` (`labels_to_index` maps a label to its colour
 /// index) with opacity `alpha`.
-pub fn draw_labels(img: &mut RgbImage, labels: &LabelImage, labels_to_index: &dyn Fn(u8) -> Option<usize>, alpha: f32) {
+pub fn draw_labels(
+    img: &mut RgbImage,
+    labels: &LabelImage,
+    labels_to_index: &dyn Fn(u8) -> Option<usize>,
+    alpha: f32,
+) {
     let (w, h) = (labels.width, labels.height);
     for y in 0..h {
         for x in 0..w {
             let l = *labels.get(x, y);
-            let Some(i) = (l != 0).then(|| labels_to_index(l)).flatten() else { continue };
+            let Some(i) = (l != 0).then(|| labels_to_index(l)).flatten() else {
+                continue;
+            };
             let edge = is_edge(w, h, x, y, |a, b| *labels.get(a, b) == l);
-            blend(img.get_pixel_mut(x as u32, y as u32), structure_colour(i), if edge { 1.0 } else { alpha });
+            blend(
+                img.get_pixel_mut(x as u32, y as u32),
+                structure_colour(i),
+                if edge { 1.0 } else { alpha },
+            );
         }
     }
 }
@@ -51,13 +72,27 @@ pub fn draw_hidden(img: &mut RgbImage, mask: &Mask, colour_index: usize) {
             let edge = is_edge(w, h, x, y, |a, b| *mask.get(a, b));
             let dash = ((x + y) / 5) % 2 == 0;
             let c = structure_colour(colour_index);
-            blend(img.get_pixel_mut(x as u32, y as u32), c, if edge && dash { 1.0 } else if edge { 0.3 } else { 0.18 });
+            blend(
+                img.get_pixel_mut(x as u32, y as u32),
+                c,
+                if edge && dash {
+                    1.0
+                } else if edge {
+                    0.3
+                } else {
+                    0.18
+                },
+            );
         }
     }
 }
 
 /// Seed strokes, opaque.
-pub fn draw_seeds(img: &mut RgbImage, seeds: &LabelImage, labels_to_index: &dyn Fn(u8) -> Option<usize>) {
+pub fn draw_seeds(
+    img: &mut RgbImage,
+    seeds: &LabelImage,
+    labels_to_index: &dyn Fn(u8) -> Option<usize>,
+) {
     for (i, &v) in seeds.data.iter().enumerate() {
         let c = match v {
             SEED_NONE => continue,
@@ -76,7 +111,9 @@ pub fn draw_seeds(img: &mut RgbImage, seeds: &LabelImage, labels_to_index: &dyn 
 
 /// Tiles same-sized images into a grid of `columns`.
 pub fn tile(images: &[RgbImage], columns: usize) -> RgbImage {
-    let Some(first) = images.first() else { return RgbImage::new(1, 1) };
+    let Some(first) = images.first() else {
+        return RgbImage::new(1, 1);
+    };
     let (w, h) = (first.width(), first.height());
     let rows = images.len().div_ceil(columns.max(1)) as u32;
     let mut out = RgbImage::new(w * columns as u32, h * rows);

@@ -31,25 +31,47 @@ fn scratch(name: &str) -> PathBuf {
 
 fn edit_json(dir: &Path, f: impl FnOnce(&mut serde_json::Value)) {
     let p = dir.join("scene.json");
-    let mut v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&p).unwrap()).unwrap();
+    let mut v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&p).unwrap()).unwrap();
     f(&mut v);
     std::fs::write(p, serde_json::to_string_pretty(&v).unwrap()).unwrap();
 }
 
 fn info(scene: &Path) -> (i32, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_endofuse")).arg("info").arg(scene).output().unwrap();
-    (out.status.code().unwrap_or(-1), String::from_utf8_lossy(&out.stderr).to_string())
+    let out = Command::new(env!("CARGO_BIN_EXE_endofuse"))
+        .arg("info")
+        .arg(scene)
+        .output()
+        .unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stderr).to_string(),
+    )
 }
 
 /// Runs `info` and checks exit 2 with one error line naming `file` and containing `words`.
 fn expect_bad(dir: &Path, file: &str, words: &str) {
     let (code, stderr) = info(dir);
-    let lines: Vec<&str> = stderr.lines().filter(|l| !l.starts_with("checking frames") && !l.trim().is_empty() && !l.contains("\rchecking")).collect();
-    assert_eq!(code, 2, "expected exit 2 for {file} / {words}, got {code}: {stderr}");
-    assert!(!stderr.contains("panicked") && !stderr.contains("internal error"), "{stderr}");
+    let lines: Vec<&str> = stderr
+        .lines()
+        .filter(|l| {
+            !l.starts_with("checking frames") && !l.trim().is_empty() && !l.contains("\rchecking")
+        })
+        .collect();
+    assert_eq!(
+        code, 2,
+        "expected exit 2 for {file} / {words}, got {code}: {stderr}"
+    );
+    assert!(
+        !stderr.contains("panicked") && !stderr.contains("internal error"),
+        "{stderr}"
+    );
     let last = lines.last().copied().unwrap_or("");
     assert!(last.contains(file), "error should name {file}: {last}");
-    assert!(last.to_lowercase().contains(&words.to_lowercase()), "error should say '{words}': {last}");
+    assert!(
+        last.to_lowercase().contains(&words.to_lowercase()),
+        "error should say '{words}': {last}"
+    );
     let _ = std::fs::remove_dir_all(dir);
 }
 
@@ -57,7 +79,11 @@ fn expect_bad(dir: &Path, file: &str, words: &str) {
 fn the_fixture_itself_is_accepted() {
     let (code, stderr) = info(&fixture());
     assert_eq!(code, 0, "{stderr}");
-    let out = Command::new(env!("CARGO_BIN_EXE_endofuse")).args(["info"]).arg(fixture().join("scene.json")).output().unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_endofuse"))
+        .args(["info"])
+        .arg(fixture().join("scene.json"))
+        .output()
+        .unwrap();
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains("baseline 5.00 mm"), "{text}");
     assert!(text.contains("hidden"), "{text}");
@@ -93,17 +119,63 @@ fn missing_and_malformed_scene_files() {
 #[test]
 fn bad_values_in_scene_json() {
     let cases: Vec<(&str, Box<dyn Fn(&mut serde_json::Value)>, &str)> = vec![
-        ("width", Box::new(|v| v["cameras"][0]["width"] = 0.into()), "must be positive"),
-        ("frames", Box::new(|v| v["frame_count"] = 0.into()), "frame_count must be positive"),
-        ("nostructures", Box::new(|v| v["structures"] = serde_json::json!([])), "no structures"),
-        ("dup-label", Box::new(|v| v["structures"][1]["label"] = 1.into()), "already used"),
-        ("reserved", Box::new(|v| v["structures"][1]["label"] = 255.into()), "reserved"),
-        ("rotation", Box::new(|v| v["cameras"][1]["rotation"] = serde_json::json!([[1, 0, 0], [0, 2, 0], [0, 0, 1]])), "not a rotation"),
-        ("focal", Box::new(|v| v["cameras"][1]["fy"] = (-3.0).into()), "focal lengths must be positive"),
-        ("template", Box::new(|v| v["cameras"][0]["frames"] = "left/{frme}.png".into()), "unknown placeholder"),
-        ("affine", Box::new(|v| v["initial_pose"]["affine"] = serde_json::json!([1, 0, 0])), "12 numbers"),
-        ("zoom", Box::new(|v| v["zoom_changes"] = serde_json::json!([[1, 5]])), "zoom_changes"),
-        ("dup-name", Box::new(|v| v["structures"][1]["name"] = "kidney".into()), "named 'kidney'"),
+        (
+            "width",
+            Box::new(|v| v["cameras"][0]["width"] = 0.into()),
+            "must be positive",
+        ),
+        (
+            "frames",
+            Box::new(|v| v["frame_count"] = 0.into()),
+            "frame_count must be positive",
+        ),
+        (
+            "nostructures",
+            Box::new(|v| v["structures"] = serde_json::json!([])),
+            "no structures",
+        ),
+        (
+            "dup-label",
+            Box::new(|v| v["structures"][1]["label"] = 1.into()),
+            "already used",
+        ),
+        (
+            "reserved",
+            Box::new(|v| v["structures"][1]["label"] = 255.into()),
+            "reserved",
+        ),
+        (
+            "rotation",
+            Box::new(|v| {
+                v["cameras"][1]["rotation"] = serde_json::json!([[1, 0, 0], [0, 2, 0], [0, 0, 1]])
+            }),
+            "not a rotation",
+        ),
+        (
+            "focal",
+            Box::new(|v| v["cameras"][1]["fy"] = (-3.0).into()),
+            "focal lengths must be positive",
+        ),
+        (
+            "template",
+            Box::new(|v| v["cameras"][0]["frames"] = "left/{frme}.png".into()),
+            "unknown placeholder",
+        ),
+        (
+            "affine",
+            Box::new(|v| v["initial_pose"]["affine"] = serde_json::json!([1, 0, 0])),
+            "12 numbers",
+        ),
+        (
+            "zoom",
+            Box::new(|v| v["zoom_changes"] = serde_json::json!([[1, 5]])),
+            "zoom_changes",
+        ),
+        (
+            "dup-name",
+            Box::new(|v| v["structures"][1]["name"] = "kidney".into()),
+            "named 'kidney'",
+        ),
     ];
     for (name, edit, words) in cases {
         let d = scratch(name);
@@ -125,14 +197,18 @@ fn bad_frames() {
     expect_bad(&d, "left/000001.png", "cannot decode");
 
     let d = scratch("frame-size");
-    image::RgbImage::new(10, 10).save(d.join("left/000000.png")).unwrap();
+    image::RgbImage::new(10, 10)
+        .save(d.join("left/000000.png"))
+        .unwrap();
     expect_bad(&d, "left/000000.png", "10×10 but the camera is 64×48");
 }
 
 #[test]
 fn bad_seeds() {
     let d = scratch("seed-size");
-    image::GrayImage::new(32, 48).save(d.join("seeds/right/000000.png")).unwrap();
+    image::GrayImage::new(32, 48)
+        .save(d.join("seeds/right/000000.png"))
+        .unwrap();
     expect_bad(&d, "seeds/right/000000.png", "32×48");
 
     let d = scratch("seed-value");
@@ -159,29 +235,55 @@ fn bad_meshes() {
     expect_bad(&d, "meshes/kidney.obj", "vertex needs 3 coordinates");
 
     let d = scratch("nan-mesh");
-    let text = std::fs::read_to_string(d.join("meshes/kidney.obj")).unwrap().replacen("v 20 0 0", "v nan 0 0", 1);
+    let text = std::fs::read_to_string(d.join("meshes/kidney.obj"))
+        .unwrap()
+        .replacen("v 20 0 0", "v nan 0 0", 1);
     std::fs::write(d.join("meshes/kidney.obj"), text).unwrap();
     expect_bad(&d, "meshes/kidney.obj", "non-finite");
 
     let d = scratch("index-mesh");
-    let text = std::fs::read_to_string(d.join("meshes/hidden.ply")).unwrap().replace("3 0 2 4\n", "3 0 2 44\n");
+    let text = std::fs::read_to_string(d.join("meshes/hidden.ply"))
+        .unwrap()
+        .replace("3 0 2 4\n", "3 0 2 44\n");
     std::fs::write(d.join("meshes/hidden.ply"), text).unwrap();
     expect_bad(&d, "meshes/hidden.ply", "refers to vertex 45");
 
     let d = scratch("catalog-count");
     std::fs::create_dir_all(d.join("meshes/kidney_catalog")).unwrap();
-    std::fs::copy(d.join("meshes/kidney.obj"), d.join("meshes/kidney_catalog/000.obj")).unwrap();
-    std::fs::write(d.join("meshes/kidney_catalog/001.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n").unwrap();
-    edit_json(&d, |v| v["structures"][0]["catalog"] = "meshes/kidney_catalog".into());
-    expect_bad(&d, "kidney_catalog/001.obj", "4 vertices but the structure's mesh has 6");
+    std::fs::copy(
+        d.join("meshes/kidney.obj"),
+        d.join("meshes/kidney_catalog/000.obj"),
+    )
+    .unwrap();
+    std::fs::write(
+        d.join("meshes/kidney_catalog/001.obj"),
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n",
+    )
+    .unwrap();
+    edit_json(&d, |v| {
+        v["structures"][0]["catalog"] = "meshes/kidney_catalog".into()
+    });
+    expect_bad(
+        &d,
+        "kidney_catalog/001.obj",
+        "4 vertices but the structure's mesh has 6",
+    );
 }
 
 #[test]
 fn bad_synth_options_are_refused() {
     let out = std::env::temp_dir().join(format!("endofuse-bad-synth-{}", std::process::id()));
-    let run = Command::new(env!("CARGO_BIN_EXE_endofuse")).args(["synth", "--frames", "0", "--out"]).arg(&out).output().unwrap();
+    let run = Command::new(env!("CARGO_BIN_EXE_endofuse"))
+        .args(["synth", "--frames", "0", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
     assert_eq!(run.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&run.stderr).contains("--frames"));
-    let run = Command::new(env!("CARGO_BIN_EXE_endofuse")).args(["synth", "--noise", "nan", "--out"]).arg(&out).output().unwrap();
+    let run = Command::new(env!("CARGO_BIN_EXE_endofuse"))
+        .args(["synth", "--noise", "nan", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
     assert_eq!(run.status.code(), Some(2));
 }

@@ -12,16 +12,39 @@ use std::process::Command;
 fn synth_dir(name: &str, args: &[&str]) -> std::path::PathBuf {
     let dir = std::env::temp_dir().join(format!("endofuse-synth-{}-{name}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
-    let out = Command::new(env!("CARGO_BIN_EXE_endofuse")).arg("synth").arg("--out").arg(&dir).args(args).output().unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let out = Command::new(env!("CARGO_BIN_EXE_endofuse"))
+        .arg("synth")
+        .arg("--out")
+        .arg(&dir)
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     dir
 }
 
 #[test]
 fn synth_writes_a_scene_info_accepts_with_consistent_ground_truth() {
-    let dir = synth_dir("stereo", &["--frames", "10", "--seed", "3", "--width", "192", "--height", "108", "--noise", "0.03"]);
-    let out = Command::new(env!("CARGO_BIN_EXE_endofuse")).arg("info").arg(&dir).output().unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let dir = synth_dir(
+        "stereo",
+        &[
+            "--frames", "10", "--seed", "3", "--width", "192", "--height", "108", "--noise", "0.03",
+        ],
+    );
+    let out = Command::new(env!("CARGO_BIN_EXE_endofuse"))
+        .arg("info")
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains("baseline 4.50 mm"), "{text}");
     assert!(text.contains("seeds: frames 0–2"), "{text}");
@@ -32,7 +55,10 @@ fn synth_writes_a_scene_info_accepts_with_consistent_ground_truth() {
     assert_eq!(scene.seeds.seeded_frames(), vec![0, 1, 2]);
     let counts = scene.seeds.pixel_counts();
     for v in [1u8, 2, 255] {
-        assert!(counts.get(&v).copied().unwrap_or(0) > 20, "class {v} seeded: {counts:?}");
+        assert!(
+            counts.get(&v).copied().unwrap_or(0) > 20,
+            "class {v} seeded: {counts:?}"
+        );
     }
     // Seeds agree with the ground truth wherever painted.
     for c in 0..2 {
@@ -49,17 +75,40 @@ fn synth_writes_a_scene_info_accepts_with_consistent_ground_truth() {
     }
     // The files are what the phantom renders, and the hidden tumour projects inside the
     // kidney's image region wherever no tool covers it.
-    let opts = SynthOptions { frames: 10, seed: 3, width: 192, height: 108, noise: 0.03, ..SynthOptions::default() };
+    let opts = SynthOptions {
+        frames: 10,
+        seed: 3,
+        width: 192,
+        height: 108,
+        noise: 0.03,
+        ..SynthOptions::default()
+    };
     let truth = Phantom::new(opts).render(5);
     for c in 0..2 {
-        let hidden = read_label_png(&dir.join(format!("gt/hidden/tumour_endo/{}/000005.png", scene.cameras[c].name))).unwrap();
+        let hidden = read_label_png(&dir.join(format!(
+            "gt/hidden/tumour_endo/{}/000005.png",
+            scene.cameras[c].name
+        )))
+        .unwrap();
         let gt = scene.ground_truth_labels(c, 5).unwrap().unwrap();
         assert_eq!(gt, truth.labels[c]);
-        assert_eq!(hidden.data.iter().map(|&v| v == 255).collect::<Vec<_>>(), truth.hidden[0].1[c].data);
-        let uncovered: Vec<usize> = (0..hidden.data.len()).filter(|&i| hidden.data[i] == 255 && !truth.tools[c].data[i]).collect();
+        assert_eq!(
+            hidden.data.iter().map(|&v| v == 255).collect::<Vec<_>>(),
+            truth.hidden[0].1[c].data
+        );
+        let uncovered: Vec<usize> = (0..hidden.data.len())
+            .filter(|&i| hidden.data[i] == 255 && !truth.tools[c].data[i])
+            .collect();
         let inside = uncovered.iter().filter(|&&i| gt.data[i] != 0).count();
-        assert!(hidden.data.iter().filter(|h| **h == 255).count() > 30, "hidden tumour projects to some pixels");
-        assert!(inside as f64 >= 0.97 * uncovered.len() as f64, "{inside}/{} uncovered hidden pixels over the kidney", uncovered.len());
+        assert!(
+            hidden.data.iter().filter(|h| **h == 255).count() > 30,
+            "hidden tumour projects to some pixels"
+        );
+        assert!(
+            inside as f64 >= 0.97 * uncovered.len() as f64,
+            "{inside}/{} uncovered hidden pixels over the kidney",
+            uncovered.len()
+        );
     }
     // Zoom: fx rises 20 % across the change, k1 follows the paper's polynomial.
     let traj = scene.ground_truth.trajectory.as_ref().unwrap();
@@ -74,24 +123,49 @@ fn synth_writes_a_scene_info_accepts_with_consistent_ground_truth() {
     // The initial pose is off the truth by several mm.
     let init = scene.initial_pose.unwrap();
     let truth = &traj.frames[0].affine;
-    let dt = ((init.q[9] - truth[9]).powi(2) + (init.q[10] - truth[10]).powi(2) + (init.q[11] - truth[11]).powi(2)).sqrt();
+    let dt = ((init.q[9] - truth[9]).powi(2)
+        + (init.q[10] - truth[10]).powi(2)
+        + (init.q[11] - truth[11]).powi(2))
+    .sqrt();
     assert!(dt > 2.0, "initial pose only {dt} mm away");
     let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
 fn more_views_and_no_tools_or_zoom() {
-    let dir = synth_dir("views", &["--frames", "2", "--width", "96", "--height", "64", "--views", "3", "--no-tools", "--no-zoom"]);
+    let dir = synth_dir(
+        "views",
+        &[
+            "--frames",
+            "2",
+            "--width",
+            "96",
+            "--height",
+            "64",
+            "--views",
+            "3",
+            "--no-tools",
+            "--no-zoom",
+        ],
+    );
     let scene = Scene::open(dir.to_str().unwrap(), FrameCheck::Decode).unwrap();
     assert_eq!(scene.cameras.len(), 3);
     assert!(scene.zoom_changes.is_empty());
-    assert!(scene.cameras[2].baseline_mm() > 20.0, "third view orbits the kidney");
+    assert!(
+        scene.cameras[2].baseline_mm() > 20.0,
+        "third view orbits the kidney"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
 fn same_seed_same_scene() {
-    let opts = SynthOptions { frames: 2, width: 64, height: 48, ..SynthOptions::default() };
+    let opts = SynthOptions {
+        frames: 2,
+        width: 64,
+        height: 48,
+        ..SynthOptions::default()
+    };
     let a = Phantom::new(opts.clone()).render(1);
     let b = Phantom::new(opts).render(1);
     assert!(a.images[0] == b.images[0] && a.labels[1] == b.labels[1]);
@@ -107,7 +181,10 @@ fn demo_scene_is_made_in_memory_and_writes_the_readme_picture() {
     assert_eq!((frame.width(), frame.height()), (480, 270));
 
     // The README picture: frames, seeds, ground truth and the hidden tumour.
-    let phantom = Phantom::new(SynthOptions { frames: 3, ..endofuse::synth::demo_options() });
+    let phantom = Phantom::new(SynthOptions {
+        frames: 3,
+        ..endofuse::synth::demo_options()
+    });
     let truth = phantom.render(0);
     let index = |l: u8| scene.structures.iter().position(|s| s.label == l);
     let mut seeded = truth.images[0].clone();
@@ -115,7 +192,10 @@ fn demo_scene_is_made_in_memory_and_writes_the_readme_picture() {
     let mut gt = truth.images[0].clone();
     endofuse::overlay::draw_labels(&mut gt, &truth.labels[0], &index, 0.35);
     endofuse::overlay::draw_hidden(&mut gt, &truth.hidden[0].1[0], 2);
-    let sheet = endofuse::overlay::tile(&[truth.images[0].clone(), truth.images[1].clone(), seeded, gt], 2);
+    let sheet = endofuse::overlay::tile(
+        &[truth.images[0].clone(), truth.images[1].clone(), seeded, gt],
+        2,
+    );
     assert_eq!(sheet.width(), 960);
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("screenshots/phantom_ground_truth.png");
     if std::env::var_os("UPDATE_SCREENSHOTS").is_some() || !path.exists() {

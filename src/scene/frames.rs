@@ -109,7 +109,10 @@ fn missing(path: &Path) -> Result<(), InputError> {
     if path.is_file() {
         Ok(())
     } else {
-        Err(InputError::new(path, "missing frame (the camera's frames template names it, and the scene's frame_count includes it)"))
+        Err(InputError::new(
+            path,
+            "missing frame (the camera's frames template names it, and the scene's frame_count includes it)",
+        ))
     }
 }
 

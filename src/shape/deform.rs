@@ -57,8 +57,15 @@ impl DeformationSpread {
     /// The same relative deformation for an organ of another size: amplitudes and radii scale
     /// with the organ's half-length.
     pub fn scaled_to(&self, organ: &Mesh) -> Self {
-        let half = organ.bounding_box().map(|(lo, hi)| 0.5 * (hi - lo).max_element()).unwrap_or(REFERENCE_HALF_LENGTH_MM);
-        let k = if half > 0.0 { half / REFERENCE_HALF_LENGTH_MM } else { 1.0 };
+        let half = organ
+            .bounding_box()
+            .map(|(lo, hi)| 0.5 * (hi - lo).max_element())
+            .unwrap_or(REFERENCE_HALF_LENGTH_MM);
+        let k = if half > 0.0 {
+            half / REFERENCE_HALF_LENGTH_MM
+        } else {
+            1.0
+        };
         Self {
             forces: self.forces,
             amplitude_mm: (self.amplitude_mm.0 * k, self.amplitude_mm.1 * k),
