@@ -29,6 +29,18 @@ enum Command {
         #[arg(long)]
         quick: bool,
     },
+    /// Train the forest on the scene's seeds; write probability, uncertainty and label maps.
+    Classify {
+        scene: String,
+        #[arg(long)]
+        out: PathBuf,
+        /// Inclusive 0-based frame range, e.g. 0..29 (default: all frames).
+        #[arg(long)]
+        frames: Option<String>,
+        /// Number of trees (N_b).
+        #[arg(long, default_value_t = 20)]
+        trees: usize,
+    },
     /// Write a synthetic stereo endoscopic phantom scene with ground truth.
     Synth {
         #[arg(long)]
@@ -105,6 +117,33 @@ fn run(cli: Cli) -> Result<()> {
             print!("{}", endofuse::info::summary(&scene));
             Ok(())
         }
+        Some(Command::Classify {
+            scene,
+            out,
+            frames,
+            trees,
+        }) => {
+            let scene = Scene::open(&scene, FrameCheck::Headers)?;
+            let range = frame_range(frames.as_deref(), scene.frame_count)?;
+            let params = endofuse::appearance::ForestParams {
+                trees: trees.max(1),
+                ..Default::default()
+            };
+            let metrics =
+                endofuse::classify::run(&scene, &out, range, &params, None, &progress("classify"))?;
+            eprintln!(
+                "classify: forest of {} trees trained in {:.2} s on {} seeded pixels (out-of-bag error {:.3}); {:.1} ms per view",
+                metrics.forest.trees,
+                metrics.forest.train_s,
+                metrics.forest.samples,
+                metrics.forest.oob_error,
+                metrics.ms_per_view
+            );
+            for (class, d) in &metrics.pixel_dice {
+                eprintln!("classify: pixel Dice {class}: {d:.3}");
+            }
+            Ok(())
+        }
         Some(Command::Synth {
             out,
             frames,
@@ -130,12 +169,7 @@ fn run(cli: Cli) -> Result<()> {
                 ..SynthOptions::default()
             };
             let started = std::time::Instant::now();
-            endofuse::synth::write_scene(&out, &options, &|done, total| {
-                eprint!("\rsynth: frame {done}/{total}");
-                if done == total {
-                    eprintln!();
-                }
-            })?;
+            endofuse::synth::write_scene(&out, &options, &progress("synth"))?;
             eprintln!(
                 "synth: wrote {} in {:.1} s",
                 out.display(),
@@ -144,4 +178,34 @@ fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
     }
+}
+
+/// A progress line on stderr, rewritten in place.
+fn progress(what: &'static str) -> impl Fn(usize, usize) + Sync {
+    move |done, total| {
+        eprint!("\r{what}: frame {done}/{total}");
+        if done == total {
+            eprintln!();
+        }
+    }
+}
+
+/// Parses `A..B` (inclusive, 0-based) against the scene's frame count; all frames when absent.
+fn frame_range(spec: Option<&str>, frame_count: usize) -> Result<(usize, usize)> {
+    let Some(spec) = spec else {
+        return Ok((0, frame_count - 1));
+    };
+    let bad = || {
+        endofuse::InputError::new(
+            "--frames",
+            format!("'{spec}' is not a range A..B inside 0..{}", frame_count - 1),
+        )
+    };
+    let (a, b) = spec.split_once("..").ok_or_else(bad)?;
+    let a: usize = a.trim().parse().map_err(|_| bad())?;
+    let b: usize = b.trim().parse().map_err(|_| bad())?;
+    if a > b || b >= frame_count {
+        return Err(bad().into());
+    }
+    Ok((a, b))
 }

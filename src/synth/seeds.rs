@@ -103,6 +103,21 @@ pub fn seeds_for_view(
         radius,
         rng,
     );
+    // Users also paint right around the organ, where mistakes would cost most: background
+    // strokes in a ring outside the anatomy.
+    let to_anatomy = squared_edt(&labels.map(|&l| l != 0));
+    let ring_px = 45.0 * labels.width.max(labels.height) as f64 / 960.0;
+    let ring = Plane {
+        width: labels.width,
+        height: labels.height,
+        data: tissue_background
+            .data
+            .iter()
+            .zip(&to_anatomy.data)
+            .map(|(&b, &d)| b && (d as f64) <= ring_px * ring_px)
+            .collect(),
+    };
+    paint_strokes(&mut seeds, &ring, SEED_BACKGROUND, 3, radius, rng);
     paint_strokes(&mut seeds, tools, SEED_BACKGROUND, 1, radius, rng);
     for &l in structure_labels {
         let strokes = if l == structure_labels[0] { 3 } else { 2 };

@@ -1,0 +1,152 @@
+//! Benchmark: our forest against scikit-learn's RandomForestClassifier (20 trees, n_jobs=2) on
+//! the same exported features and samples, in one run.
+//!
+//!     cargo bench --bench forest_vs_sklearn
+//!
+//! Trains on the seed strokes of frames 0–2 of a 960×540 stereo phantom (tools, noise 0.03),
+//! tests on every pixel of frames 5 and 9 in both views against ground truth. The Python half
+//! (`benches/sklearn_forest.py`) pip-installs scikit-learn if it is missing. Not part of CI.
+
+use endofuse::appearance::forest::argmax;
+use endofuse::appearance::{
+    ClassMap, FEATURE_COUNT, Forest, ForestParams, FrameFeatures, Samples, collect_samples,
+};
+use endofuse::synth::{SynthOptions, memory_scene};
+use std::io::Write;
+use std::path::Path;
+use std::time::Instant;
+
+fn write(path: &Path, bytes: &[u8]) {
+    std::fs::File::create(path)
+        .and_then(|mut f| f.write_all(bytes))
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+}
+
+fn main() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/forest-bench");
+    std::fs::create_dir_all(&dir).unwrap();
+    eprintln!("making the phantom (960×540, 10 frames, tools, noise 0.03)…");
+    let scene = memory_scene(&SynthOptions {
+        frames: 10,
+        seed: 5,
+        noise: 0.03,
+        ..SynthOptions::default()
+    })
+    .unwrap();
+    let classes = ClassMap::from_scene(&scene);
+    let started = Instant::now();
+    let train = collect_samples(&scene, &classes, None).unwrap();
+    let extract_train_s = started.elapsed().as_secs_f64();
+    let mut test = Samples::default();
+    let mut extract_ms = Vec::new();
+    for t in [5usize, 9] {
+        for c in 0..scene.cameras.len() {
+            let frame = scene.frame(c, t).unwrap();
+            let s = Instant::now();
+            let ff = FrameFeatures::new(&frame);
+            let all = ff.all();
+            extract_ms.push(s.elapsed().as_secs_f64() * 1e3);
+            let gt = scene.ground_truth_labels(c, t).unwrap().unwrap();
+            for (f, &l) in all.into_iter().zip(&gt.data) {
+                test.push(f, classes.class_of_label(l).unwrap_or(0) as u8);
+            }
+        }
+    }
+    let flat = |s: &Samples| {
+        s.features
+            .iter()
+            .flat_map(|f| f.iter().copied())
+            .collect::<Vec<u8>>()
+    };
+    write(&dir.join("train_x.u8"), &flat(&train));
+    write(&dir.join("train_y.u8"), &train.classes);
+    write(&dir.join("test_x.u8"), &flat(&test));
+    write(&dir.join("test_y.u8"), &test.classes);
+    write(
+        &dir.join("meta.json"),
+        format!(
+            "{{\"features\": {FEATURE_COUNT}, \"classes\": {}}}",
+            classes.len()
+        )
+        .as_bytes(),
+    );
+
+    let params = ForestParams::default();
+    let s = Instant::now();
+    let (forest, stats) = Forest::train(&train, classes.len(), &params).unwrap();
+    let ours_train_s = s.elapsed().as_secs_f64();
+    // Best of three for inference.
+    let mut ours_predict_s = f64::INFINITY;
+    let mut probs = Vec::new();
+    for _ in 0..3 {
+        let s = Instant::now();
+        probs = forest.predict_many(&test.features);
+        ours_predict_s = ours_predict_s.min(s.elapsed().as_secs_f64());
+    }
+    let k = classes.len();
+    let correct = (0..test.len())
+        .filter(|&i| argmax(&probs[i * k..(i + 1) * k]) == test.classes[i] as usize)
+        .count();
+    let ours_acc = correct as f64 / test.len() as f64;
+    let ours_rate = test.len() as f64 / ours_predict_s;
+
+    eprintln!("running scikit-learn on the same data…");
+    let py = std::process::Command::new("python3")
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("benches/sklearn_forest.py"))
+        .arg(&dir)
+        .output();
+    let sk: Option<serde_json::Value> = match py {
+        Ok(out) if out.status.success() => String::from_utf8_lossy(&out.stdout)
+            .lines()
+            .last()
+            .and_then(|l| serde_json::from_str(l).ok()),
+        Ok(out) => {
+            eprintln!(
+                "scikit-learn run failed: {}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+            None
+        }
+        Err(e) => {
+            eprintln!("cannot run python3: {e}");
+            None
+        }
+    };
+    let mean_extract = extract_ms.iter().sum::<f64>() / extract_ms.len() as f64;
+    println!(
+        "training samples: {} (features of 6 seeded views: {:.2} s); test pixels: {}",
+        train.len(),
+        extract_train_s,
+        test.len()
+    );
+    println!("feature extraction, full 960×540 view: {mean_extract:.1} ms");
+    println!(
+        "{:<14} {:>10} {:>16} {:>10}",
+        "forest", "train s", "predict px/s", "accuracy"
+    );
+    println!(
+        "{:<14} {:>10.3} {:>16.0} {:>10.4}   (OOB error {:.4}, {} nodes)",
+        "endofuse", ours_train_s, ours_rate, ours_acc, stats.oob_error, stats.nodes
+    );
+    if let Some(sk) = sk {
+        let (tr, rate, acc) = (
+            sk["train_s"].as_f64().unwrap_or(f64::NAN),
+            sk["predict_px_per_s"].as_f64().unwrap_or(f64::NAN),
+            sk["accuracy"].as_f64().unwrap_or(f64::NAN),
+        );
+        println!(
+            "{:<14} {:>10.3} {:>16.0} {:>10.4}   ({})",
+            "scikit-learn",
+            tr,
+            rate,
+            acc,
+            sk["version"].as_str().unwrap_or("?")
+        );
+        println!(
+            "ratios: training {:.1}× faster, inference {:.1}× the throughput, accuracy {:+.4}",
+            tr / ours_train_s,
+            ours_rate / rate,
+            ours_acc - acc
+        );
+    }
+}

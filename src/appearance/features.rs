@@ -1,0 +1,356 @@
+//! Per-pixel appearance features (paper §III): normalised RGB, YCbCr and local colour
+//! histograms, plus box-smoothed colour at two scales, gradient magnitude and local contrast
+//! (ilastik's usual extras, kept because they pay: see `benches/forest_vs_sklearn.md`).
+//!
+//! Every windowed feature comes from integral images, so its cost does not grow with the window,
+//! and a single pixel's vector costs O(1) once a frame is prepared: the fit asks only for pixels
+//! near contours. Window radii are given for a 960-px-wide image and scale with the width, so
+//! pyramid levels see the same physical window. Features are quantised to u8 with fixed ranges,
+//! so a model trained on one frame applies to any other.
+
+use image::RgbImage;
+use rayon::prelude::*;
+
+/// Number of features per pixel.
+pub const FEATURE_COUNT: usize = 29;
+/// Bins per channel of the local histograms.
+const HIST_BINS: usize = 4;
+
+/// What each feature is, for reports and the app.
+pub const FEATURE_NAMES: [&str; FEATURE_COUNT] = [
+    "r/(r+g+b)",
+    "g/(r+g+b)",
+    "b/(r+g+b)",
+    "Y",
+    "Cb",
+    "Cr",
+    "hist Y 0",
+    "hist Y 1",
+    "hist Y 2",
+    "hist Y 3",
+    "hist Cb 0",
+    "hist Cb 1",
+    "hist Cb 2",
+    "hist Cb 3",
+    "hist Cr 0",
+    "hist Cr 1",
+    "hist Cr 2",
+    "hist Cr 3",
+    "mean Y small",
+    "mean Cb small",
+    "mean Cr small",
+    "mean Y large",
+    "mean Cb large",
+    "mean Cr large",
+    "gradient Y",
+    "std Y",
+    "mean Y context",
+    "mean Cb context",
+    "mean Cr context",
+];
+
+/// Window radii (px) at a 960-px-wide image.
+const HIST_RADIUS_960: f64 = 5.0;
+const SMALL_RADIUS_960: f64 = 3.0;
+const LARGE_RADIUS_960: f64 = 10.0;
+const CONTEXT_RADIUS_960: f64 = 24.0;
+
+/// One pixel's features.
+pub type FeatureVector = [u8; FEATURE_COUNT];
+
+/// A frame prepared for feature queries: per-pixel channels and integral images.
+pub struct FrameFeatures {
+    width: usize,
+    height: usize,
+    /// Per pixel: nr, ng, nb, Y, Cb, Cr (u8).
+    base: Vec<[u8; 6]>,
+    /// Integral images ((w+1)×(h+1)) of: the 12 histogram indicators, Y, Cb, Cr.
+    integrals: Vec<Vec<u32>>,
+    /// Integral of Y², for the local standard deviation.
+    integral_y2: Vec<u64>,
+    /// Box-smoothed Y (radius 1), for the gradient.
+    smooth_y: Vec<f32>,
+    radii: [usize; 4],
+}
+
+fn radius_for(width: usize, r960: f64) -> usize {
+    ((r960 * width as f64 / 960.0).round() as usize).max(1)
+}
+
+impl FrameFeatures {
+    pub fn new(frame: &RgbImage) -> Self {
+        let (w, h) = (frame.width() as usize, frame.height() as usize);
+        let base: Vec<[u8; 6]> = frame
+            .as_raw()
+            .par_chunks_exact(3)
+            .map(|p| {
+                let (r, g, b) = (p[0] as f32, p[1] as f32, p[2] as f32);
+                let s = r + g + b + 1e-3;
+                let y = 0.299 * r + 0.587 * g + 0.114 * b;
+                let cb = 128.0 + 0.564 * (b - y);
+                let cr = 128.0 + 0.713 * (r - y);
+                let q = |v: f32| v.round().clamp(0.0, 255.0) as u8;
+                [
+                    q(255.0 * r / s),
+                    q(255.0 * g / s),
+                    q(255.0 * b / s),
+                    q(y),
+                    q(cb),
+                    q(cr),
+                ]
+            })
+            .collect();
+        // 15 integral images, one per channel, built in parallel.
+        let integrals: Vec<Vec<u32>> = (0..3 * HIST_BINS + 3)
+            .into_par_iter()
+            .map(|k| {
+                let value = |px: &[u8; 6]| -> u32 {
+                    if k < 3 * HIST_BINS {
+                        let (ch, bin) = (3 + k / HIST_BINS, k % HIST_BINS);
+                        (px[ch] as usize * HIST_BINS / 256 == bin) as u32
+                    } else {
+                        px[3 + (k - 3 * HIST_BINS)] as u32
+                    }
+                };
+                integral(w, h, |i| value(&base[i]))
+            })
+            .collect();
+        let integral_y2 = {
+            let mut out = vec![0u64; (w + 1) * (h + 1)];
+            for y in 0..h {
+                let mut row = 0u64;
+                for x in 0..w {
+                    let v = base[y * w + x][3] as u64;
+                    row += v * v;
+                    out[(y + 1) * (w + 1) + x + 1] = out[y * (w + 1) + x + 1] + row;
+                }
+            }
+            out
+        };
+        let iy = &integrals[3 * HIST_BINS];
+        let smooth_y: Vec<f32> = (0..w * h)
+            .into_par_iter()
+            .map(|i| {
+                let (x, y) = (i % w, i / w);
+                let (sum, area) = box_sum(iy, w, h, x, y, 1);
+                sum as f32 / area as f32
+            })
+            .collect();
+        let radii = [
+            radius_for(w, HIST_RADIUS_960),
+            radius_for(w, SMALL_RADIUS_960),
+            radius_for(w, LARGE_RADIUS_960),
+            radius_for(w, CONTEXT_RADIUS_960),
+        ];
+        Self {
+            width: w,
+            height: h,
+            base,
+            integrals,
+            integral_y2,
+            smooth_y,
+            radii,
+        }
+    }
+
+    pub fn width(&self) -> usize {
+        self.width
+    }
+
+    pub fn height(&self) -> usize {
+        self.height
+    }
+
+    /// The feature vector of pixel (x, y).
+    pub fn at(&self, x: usize, y: usize) -> FeatureVector {
+        let (w, h) = (self.width, self.height);
+        let mut f = [0u8; FEATURE_COUNT];
+        let px = &self.base[y * w + x];
+        f[..6].copy_from_slice(px);
+        let q = |v: f64| v.round().clamp(0.0, 255.0) as u8;
+        let [rh, rs, rl, rc] = self.radii;
+        for k in 0..3 * HIST_BINS {
+            let (sum, area) = box_sum(&self.integrals[k], w, h, x, y, rh);
+            f[6 + k] = q(255.0 * sum as f64 / area as f64);
+        }
+        for (j, r) in [rs, rl].into_iter().enumerate() {
+            for c in 0..3 {
+                let (sum, area) = box_sum(&self.integrals[3 * HIST_BINS + c], w, h, x, y, r);
+                f[18 + 3 * j + c] = q(sum as f64 / area as f64);
+            }
+        }
+        let s = |xx: usize, yy: usize| self.smooth_y[yy.min(h - 1) * w + xx.min(w - 1)];
+        let (xl, xr, yu, yd) = (x.saturating_sub(1), x + 1, y.saturating_sub(1), y + 1);
+        let gx = s(xr, y) - s(xl, y);
+        let gy = s(x, yd) - s(x, yu);
+        f[24] = q(2.0 * (gx * gx + gy * gy).sqrt() as f64);
+        let (sum, area) = box_sum(&self.integrals[3 * HIST_BINS], w, h, x, y, rs);
+        let (sum2, _) = box_sum64(&self.integral_y2, w, h, x, y, rs);
+        let mean = sum as f64 / area as f64;
+        let var = (sum2 as f64 / area as f64 - mean * mean).max(0.0);
+        f[25] = q(4.0 * var.sqrt());
+        for c in 0..3 {
+            let (sum, area) = box_sum(&self.integrals[3 * HIST_BINS + c], w, h, x, y, rc);
+            f[26 + c] = q(sum as f64 / area as f64);
+        }
+        f
+    }
+
+    /// Features of every pixel, row-major.
+    pub fn all(&self) -> Vec<FeatureVector> {
+        (0..self.width * self.height)
+            .into_par_iter()
+            .map(|i| self.at(i % self.width, i / self.width))
+            .collect()
+    }
+
+    /// Features of the listed pixels (x, y).
+    pub fn pixels(&self, list: &[(u32, u32)]) -> Vec<FeatureVector> {
+        list.par_iter()
+            .map(|&(x, y)| self.at(x as usize, y as usize))
+            .collect()
+    }
+}
+
+/// (w+1)×(h+1) summed-area table of `value(pixel index)`.
+fn integral(w: usize, h: usize, value: impl Fn(usize) -> u32) -> Vec<u32> {
+    let mut out = vec![0u32; (w + 1) * (h + 1)];
+    for y in 0..h {
+        let mut row = 0u32;
+        for x in 0..w {
+            row += value(y * w + x);
+            out[(y + 1) * (w + 1) + x + 1] = out[y * (w + 1) + x + 1] + row;
+        }
+    }
+    out
+}
+
+/// Sum and pixel count of the window of radius r around (x, y), clipped to the image.
+#[inline]
+fn box_sum(table: &[u32], w: usize, h: usize, x: usize, y: usize, r: usize) -> (u32, u32) {
+    let (x0, y0, x1, y1) = (
+        x.saturating_sub(r),
+        y.saturating_sub(r),
+        (x + r + 1).min(w),
+        (y + r + 1).min(h),
+    );
+    let s = w + 1;
+    let sum = table[y1 * s + x1]
+        .wrapping_sub(table[y0 * s + x1])
+        .wrapping_sub(table[y1 * s + x0])
+        .wrapping_add(table[y0 * s + x0]);
+    (sum, ((x1 - x0) * (y1 - y0)) as u32)
+}
+
+#[inline]
+fn box_sum64(table: &[u64], w: usize, h: usize, x: usize, y: usize, r: usize) -> (u64, u64) {
+    let (x0, y0, x1, y1) = (
+        x.saturating_sub(r),
+        y.saturating_sub(r),
+        (x + r + 1).min(w),
+        (y + r + 1).min(h),
+    );
+    let s = w + 1;
+    let sum = table[y1 * s + x1] + table[y0 * s + x0] - table[y0 * s + x1] - table[y1 * s + x0];
+    (sum, ((x1 - x0) * (y1 - y0)) as u64)
+}
+
+/// Halves a frame by 2×2 averaging (one pyramid level).
+pub fn downsample(frame: &RgbImage) -> RgbImage {
+    let (w, h) = ((frame.width() / 2).max(1), (frame.height() / 2).max(1));
+    RgbImage::from_fn(w, h, |x, y| {
+        let mut acc = [0u32; 3];
+        for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+            let p = frame.get_pixel(
+                (2 * x + dx).min(frame.width() - 1),
+                (2 * y + dy).min(frame.height() - 1),
+            );
+            for k in 0..3 {
+                acc[k] += p.0[k] as u32;
+            }
+        }
+        image::Rgb(acc.map(|v| ((v + 2) / 4) as u8))
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::Rng;
+
+    /// Windowed features equal brute-force sums over the clipped window.
+    #[test]
+    fn integral_features_match_brute_force() {
+        let mut rng = Rng::new(71);
+        let (w, h) = (97usize, 53usize);
+        let frame = RgbImage::from_fn(w as u32, h as u32, |_, _| {
+            image::Rgb([
+                rng.below(256) as u8,
+                rng.below(256) as u8,
+                rng.below(256) as u8,
+            ])
+        });
+        let ff = FrameFeatures::new(&frame);
+        let all = ff.all();
+        let [rh, rs, rl, _] = ff.radii;
+        for _ in 0..300 {
+            let (x, y) = (rng.below(w), rng.below(h));
+            let f = all[y * w + x];
+            assert_eq!(f, ff.at(x, y));
+            let window = |r: usize| -> Vec<[u8; 6]> {
+                let mut v = Vec::new();
+                for yy in y.saturating_sub(r)..(y + r + 1).min(h) {
+                    for xx in x.saturating_sub(r)..(x + r + 1).min(w) {
+                        v.push(ff.base[yy * w + xx]);
+                    }
+                }
+                v
+            };
+            let win = window(rh);
+            for ch in 0..3 {
+                for bin in 0..HIST_BINS {
+                    let n = win
+                        .iter()
+                        .filter(|p| p[3 + ch] as usize * HIST_BINS / 256 == bin)
+                        .count();
+                    let expect = (255.0 * n as f64 / win.len() as f64).round() as u8;
+                    assert_eq!(
+                        f[6 + ch * HIST_BINS + bin],
+                        expect,
+                        "hist ch {ch} bin {bin}"
+                    );
+                }
+            }
+            for (j, r) in [rs, rl].into_iter().enumerate() {
+                let win = window(r);
+                for c in 0..3 {
+                    let mean = win.iter().map(|p| p[3 + c] as f64).sum::<f64>() / win.len() as f64;
+                    assert_eq!(f[18 + 3 * j + c], mean.round() as u8);
+                }
+            }
+            let win = window(rs);
+            let mean = win.iter().map(|p| p[3] as f64).sum::<f64>() / win.len() as f64;
+            let var = win
+                .iter()
+                .map(|p| (p[3] as f64 - mean).powi(2))
+                .sum::<f64>()
+                / win.len() as f64;
+            assert!((f[25] as f64 - (4.0 * var.sqrt()).min(255.0)).abs() <= 1.0);
+        }
+        // Histogram fractions of one channel sum to one window.
+        let f = ff.at(40, 20);
+        let total: u32 = f[6..10].iter().map(|&v| v as u32).sum();
+        assert!((253..=257).contains(&total), "{total}");
+    }
+
+    #[test]
+    fn radii_scale_with_width_and_downsample_halves() {
+        assert_eq!(radius_for(960, LARGE_RADIUS_960), 10);
+        assert_eq!(radius_for(480, LARGE_RADIUS_960), 5);
+        assert_eq!(radius_for(1920, LARGE_RADIUS_960), 20);
+        let img = RgbImage::from_fn(5, 4, |x, _| image::Rgb([x as u8 * 10, 0, 0]));
+        let d = downsample(&img);
+        assert_eq!((d.width(), d.height()), (2, 2));
+        assert_eq!(d.get_pixel(0, 0).0[0], 5);
+    }
+}

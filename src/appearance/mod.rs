@@ -1,0 +1,271 @@
+//! Appearance: the forest that turns painted strokes into per-pixel class probabilities (paper
+//! §III, eq. 9). Class 0 is background/tools (seed 255, ground truth 0); class k ≥ 1 is the k-th
+//! visible structure. p_f^n is the forest's probability of structure n, p_b^n = 1 − p_f^n.
+
+pub mod features;
+pub mod forest;
+
+pub use features::{FEATURE_COUNT, FrameFeatures};
+pub use forest::{Forest, ForestParams, Samples, TrainStats};
+
+use crate::error::{Error, InputError};
+use crate::plane::{LabelImage, Plane};
+use crate::scene::{SEED_BACKGROUND, SEED_NONE, Scene};
+use image::RgbImage;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::sync::atomic::{AtomicBool, Ordering};
+
+/// Most training pixels kept per class (deterministic thinning beyond): painting a whole frame
+/// should not make training slow.
+pub const MAX_SAMPLES_PER_CLASS: usize = 60_000;
+
+/// Which forest class stands for what.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ClassMap {
+    /// Label of each class (0 for background).
+    pub labels: Vec<u8>,
+    /// Name of each class ("background", then structure names).
+    pub names: Vec<String>,
+}
+
+impl ClassMap {
+    pub fn from_scene(scene: &Scene) -> Self {
+        let mut labels = vec![0u8];
+        let mut names = vec!["background".to_string()];
+        for (_, s) in scene.visible_structures() {
+            labels.push(s.label);
+            names.push(s.name.clone());
+        }
+        Self { labels, names }
+    }
+
+    pub fn len(&self) -> usize {
+        self.labels.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.labels.is_empty()
+    }
+
+    /// Class of a seed value (None for unpainted or unknown values).
+    pub fn class_of_seed(&self, v: u8) -> Option<usize> {
+        match v {
+            SEED_NONE => None,
+            SEED_BACKGROUND => Some(0),
+            l => self
+                .labels
+                .iter()
+                .skip(1)
+                .position(|&x| x == l)
+                .map(|i| i + 1),
+        }
+    }
+
+    /// Class of a ground-truth label (0 = background).
+    pub fn class_of_label(&self, l: u8) -> Option<usize> {
+        self.labels.iter().position(|&x| x == l)
+    }
+}
+
+/// A trained appearance model: the forest and what its classes mean.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Appearance {
+    pub classes: ClassMap,
+    pub forest: Forest,
+    pub stats: TrainStats,
+}
+
+/// Per-pixel class probabilities of one frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ProbabilityMaps {
+    pub width: usize,
+    pub height: usize,
+    pub classes: usize,
+    /// `classes` values per pixel, row-major.
+    pub data: Vec<f32>,
+}
+
+impl ProbabilityMaps {
+    pub fn class_plane(&self, k: usize) -> Plane<f32> {
+        Plane {
+            width: self.width,
+            height: self.height,
+            data: self
+                .data
+                .iter()
+                .skip(k)
+                .step_by(self.classes)
+                .copied()
+                .collect(),
+        }
+    }
+
+    /// Most probable class's label per pixel.
+    pub fn argmax_labels(&self, map: &ClassMap) -> LabelImage {
+        Plane {
+            width: self.width,
+            height: self.height,
+            data: self
+                .data
+                .chunks_exact(self.classes)
+                .map(|p| map.labels[forest::argmax(p)])
+                .collect(),
+        }
+    }
+
+    /// 1 − (p_top1 − p_top2), as ilastik shows uncertainty.
+    pub fn uncertainty(&self) -> Plane<f32> {
+        let data = self
+            .data
+            .chunks_exact(self.classes)
+            .map(|p| {
+                let (mut a, mut b) = (0f32, 0f32);
+                for &v in p {
+                    if v > a {
+                        b = a;
+                        a = v;
+                    } else if v > b {
+                        b = v;
+                    }
+                }
+                1.0 - (a - b)
+            })
+            .collect();
+        Plane {
+            width: self.width,
+            height: self.height,
+            data,
+        }
+    }
+}
+
+impl Appearance {
+    /// Trains the forest on every seeded pixel of every seeded frame in every view.
+    pub fn train(
+        scene: &Scene,
+        params: &ForestParams,
+        cancel: Option<&AtomicBool>,
+    ) -> Result<Appearance, Error> {
+        let started = std::time::Instant::now();
+        let classes = ClassMap::from_scene(scene);
+        let samples = collect_samples(scene, &classes, cancel)?;
+        let (forest, mut stats) = Forest::train(&samples, classes.len(), params)
+            .map_err(|p| InputError::new(seeds_origin(scene), p))?;
+        // Report what the user waits for: reading seeded frames, features and the forest.
+        stats.train_s = started.elapsed().as_secs_f64();
+        Ok(Appearance {
+            classes,
+            forest,
+            stats,
+        })
+    }
+
+    pub fn classify_frame(&self, frame: &RgbImage) -> ProbabilityMaps {
+        let ff = FrameFeatures::new(frame);
+        ProbabilityMaps {
+            width: ff.width(),
+            height: ff.height(),
+            classes: self.classes.len(),
+            data: self.forest.predict_many(&ff.all()),
+        }
+    }
+
+    /// Probabilities of listed pixels of a prepared frame (`classes` values each).
+    pub fn classify_pixels(&self, ff: &FrameFeatures, pixels: &[(u32, u32)]) -> Vec<f32> {
+        self.forest.predict_many(&ff.pixels(pixels))
+    }
+}
+
+fn seeds_origin(scene: &Scene) -> String {
+    match (&scene.root, &scene.seeds_template) {
+        (Some(root), Some(t)) => root.join(t.source()).display().to_string(),
+        _ => scene.origin.clone(),
+    }
+}
+
+/// Feature vectors and classes of all seeded pixels. Errors name the seeds and the class.
+pub fn collect_samples(
+    scene: &Scene,
+    classes: &ClassMap,
+    cancel: Option<&AtomicBool>,
+) -> Result<Samples, Error> {
+    let origin = seeds_origin(scene);
+    let jobs: Vec<(usize, usize)> = scene
+        .seeds
+        .by_camera
+        .iter()
+        .enumerate()
+        .flat_map(|(c, m)| m.keys().map(move |&t| (c, t)))
+        .collect();
+    if jobs.is_empty() || scene.seeds.pixel_counts().is_empty() {
+        return Err(InputError::new(
+            &origin,
+            "no seeds: paint background/tools and every visible structure on at least one frame",
+        )
+        .into());
+    }
+    let per_job: Vec<Result<Vec<(features::FeatureVector, u8)>, Error>> = jobs
+        .par_iter()
+        .map(|&(c, t)| {
+            if cancel.is_some_and(|f| f.load(Ordering::Relaxed)) {
+                return Err(Error::Cancelled);
+            }
+            let seeds = &scene.seeds.by_camera[c][&t];
+            let frame = scene.frame(c, t)?;
+            if seeds.width != frame.width() as usize || seeds.height != frame.height() as usize {
+                return Err(InputError::new(
+                    &origin,
+                    format!(
+                        "seeds of frame {t} in camera '{}' are {}×{} but the frame is {}×{}",
+                        scene.cameras[c].name,
+                        seeds.width,
+                        seeds.height,
+                        frame.width(),
+                        frame.height()
+                    ),
+                )
+                .into());
+            }
+            let ff = FrameFeatures::new(&frame);
+            Ok(seeds
+                .data
+                .iter()
+                .enumerate()
+                .filter_map(|(i, &v)| {
+                    classes
+                        .class_of_seed(v)
+                        .map(|k| (ff.at(i % seeds.width, i / seeds.width), k as u8))
+                })
+                .collect())
+        })
+        .collect();
+    let mut by_class: Vec<Vec<features::FeatureVector>> = vec![Vec::new(); classes.len()];
+    for job in per_job {
+        for (f, k) in job? {
+            by_class[k as usize].push(f);
+        }
+    }
+    for (k, v) in by_class.iter().enumerate() {
+        if v.is_empty() {
+            let what = if k == 0 {
+                "background/tools (seed value 255)".to_string()
+            } else {
+                format!("'{}' (label {})", classes.names[k], classes.labels[k])
+            };
+            return Err(InputError::new(
+                &origin,
+                format!("no seeded pixel for {what}: paint at least one stroke of every class"),
+            )
+            .into());
+        }
+    }
+    let mut samples = Samples::default();
+    for (k, v) in by_class.into_iter().enumerate() {
+        let step = v.len().div_ceil(MAX_SAMPLES_PER_CLASS).max(1);
+        for f in v.into_iter().step_by(step) {
+            samples.push(f, k as u8);
+        }
+    }
+    Ok(samples)
+}

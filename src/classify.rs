@@ -1,0 +1,133 @@
+//! `endofuse classify` (CONTRACT §1, §3): trains the forest on the scene's seeds and writes, per
+//! frame and camera, 8-bit probability maps per class, the uncertainty map and argmax labels,
+//! with metrics.json (forest size, training time, out-of-bag error, pixel Dice per class where
+//! ground truth exists).
+
+use crate::appearance::{Appearance, ForestParams};
+use crate::error::Error;
+use crate::plane::{Plane, dice};
+use crate::scene::Scene;
+use crate::scene::write::{write_json_atomic, write_labels};
+use rayon::prelude::*;
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+
+#[derive(Debug, Clone, Serialize)]
+pub struct ForestMetrics {
+    pub trees: usize,
+    pub train_s: f64,
+    pub oob_error: f64,
+    pub oob_balanced_error: f64,
+    pub samples: usize,
+}
+
+/// What `classify` writes to metrics.json.
+#[derive(Debug, Clone, Serialize)]
+pub struct ClassifyMetrics {
+    pub forest: ForestMetrics,
+    /// Mean pixel Dice per class over frames and cameras with ground truth.
+    pub pixel_dice: BTreeMap<String, f64>,
+    /// The same over frames without seeds only (what the forest never saw).
+    pub pixel_dice_unseeded: BTreeMap<String, f64>,
+    pub frames: usize,
+    /// Feature extraction and forest evaluation of one full frame of one camera.
+    pub ms_per_view: f64,
+}
+
+/// Quantises a probability in [0, 1] to 8 bits (255 = 1.0).
+pub fn to_u8(p: &Plane<f32>) -> Plane<u8> {
+    p.map(|&v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
+}
+
+/// Runs the whole command; `progress(done, total)` as frames finish.
+pub fn run(
+    scene: &Scene,
+    out: &Path,
+    frames: (usize, usize),
+    params: &ForestParams,
+    cancel: Option<&AtomicBool>,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<ClassifyMetrics, Error> {
+    let model = Appearance::train(scene, params, cancel)?;
+    let seeded = scene.seeds.seeded_frames();
+    let names = &model.classes.names;
+    let done = AtomicUsize::new(0);
+    let total = frames.1 + 1 - frames.0;
+    let jobs: Vec<(usize, usize)> = (frames.0..=frames.1)
+        .flat_map(|t| (0..scene.cameras.len()).map(move |c| (t, c)))
+        .collect();
+    let classify_ns = AtomicUsize::new(0);
+    // Per job: Dice per class (None where the class is absent from both).
+    let results: Vec<(usize, Vec<Option<f64>>)> = jobs
+        .par_iter()
+        .map(|&(t, c)| -> Result<_, Error> {
+            if cancel.is_some_and(|f| f.load(Ordering::Relaxed)) {
+                return Err(Error::Cancelled);
+            }
+            let frame = scene.frame(c, t)?;
+            let started = std::time::Instant::now();
+            let maps = model.classify_frame(&frame);
+            classify_ns.fetch_add(started.elapsed().as_nanos() as usize, Ordering::Relaxed);
+            let cam = &scene.cameras[c].name;
+            for (k, name) in names.iter().enumerate() {
+                write_labels(
+                    &out.join(format!("prob/{name}/{cam}/{t:06}.png")),
+                    &to_u8(&maps.class_plane(k)),
+                )?;
+            }
+            write_labels(
+                &out.join(format!("uncertainty/{cam}/{t:06}.png")),
+                &to_u8(&maps.uncertainty()),
+            )?;
+            let labels = maps.argmax_labels(&model.classes);
+            write_labels(&out.join(format!("labels/{cam}/{t:06}.png")), &labels)?;
+            let scores = match scene.ground_truth_labels(c, t) {
+                Some(gt) => {
+                    let gt = gt?;
+                    model
+                        .classes
+                        .labels
+                        .iter()
+                        .map(|&l| dice(&labels.mask_of(l), &gt.mask_of(l)))
+                        .collect()
+                }
+                None => Vec::new(),
+            };
+            if c + 1 == scene.cameras.len() {
+                progress(done.fetch_add(1, Ordering::Relaxed) + 1, total);
+            }
+            Ok((t, scores))
+        })
+        .collect::<Result<_, _>>()?;
+    let mean_dice = |keep: &dyn Fn(usize) -> bool| -> BTreeMap<String, f64> {
+        names
+            .iter()
+            .enumerate()
+            .filter_map(|(k, name)| {
+                let v: Vec<f64> = results
+                    .iter()
+                    .filter(|(t, _)| keep(*t))
+                    .filter_map(|(_, s)| s.get(k).copied().flatten())
+                    .collect();
+                (!v.is_empty()).then(|| (name.clone(), v.iter().sum::<f64>() / v.len() as f64))
+            })
+            .collect()
+    };
+    let metrics = ClassifyMetrics {
+        forest: ForestMetrics {
+            trees: model.forest.tree_count(),
+            train_s: model.stats.train_s,
+            oob_error: model.stats.oob_error,
+            oob_balanced_error: model.stats.oob_balanced_error,
+            samples: model.stats.samples,
+        },
+        pixel_dice: mean_dice(&|_| true),
+        pixel_dice_unseeded: mean_dice(&|t| !seeded.contains(&t)),
+        frames: total,
+        ms_per_view: classify_ns.load(Ordering::Relaxed) as f64 / 1e6 / jobs.len().max(1) as f64,
+    };
+    write_json_atomic(&out.join("metrics.json"), &metrics)?;
+    Ok(metrics)
+}

@@ -1,0 +1,168 @@
+//! `endofuse classify` end to end: outputs exactly as CONTRACT §3, the forest learns from seeds
+//! of the first frames what later frames hold, and bad seeds are refused with exit 2.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn run(args: &[&str], extra: &[&Path]) -> std::process::Output {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_endofuse"));
+    cmd.args(args);
+    for p in extra {
+        cmd.arg(p);
+    }
+    cmd.output().unwrap()
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("endofuse-classify-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    d
+}
+
+#[test]
+fn classify_writes_the_contract_outputs_and_segments_later_frames() {
+    let scene = tmp("scene");
+    let out = run(
+        &[
+            "synth", "--frames", "8", "--seed", "2", "--width", "320", "--height", "180",
+            "--noise", "0.03", "--out",
+        ],
+        &[&scene],
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let dir = tmp("out");
+    let out = Command::new(env!("CARGO_BIN_EXE_endofuse"))
+        .arg("classify")
+        .arg(&scene)
+        .arg("--out")
+        .arg(&dir)
+        .args(["--frames", "2..7"])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    for cam in ["left", "right"] {
+        for class in ["background", "kidney", "tumour_exo"] {
+            assert!(
+                dir.join(format!("prob/{class}/{cam}/000007.png")).exists(),
+                "{class} {cam}"
+            );
+        }
+        assert!(dir.join(format!("uncertainty/{cam}/000002.png")).exists());
+        assert!(dir.join(format!("labels/{cam}/000005.png")).exists());
+        assert!(
+            !dir.join(format!("labels/{cam}/000001.png")).exists(),
+            "outside --frames"
+        );
+    }
+    let prob = image::open(dir.join("prob/kidney/left/000006.png")).unwrap();
+    assert_eq!((prob.width(), prob.height()), (320, 180));
+    assert!(matches!(prob.color(), image::ColorType::L8));
+    let metrics: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
+    assert_eq!(metrics["forest"]["trees"], 20);
+    assert!(metrics["forest"]["train_s"].as_f64().unwrap() > 0.0);
+    assert!(metrics["forest"]["oob_error"].as_f64().unwrap() < 0.05);
+    // Frames 3..7 were never seeded: the forest still finds kidney and tumour there.
+    let unseeded = &metrics["pixel_dice_unseeded"];
+    assert!(unseeded["kidney"].as_f64().unwrap() > 0.9, "{metrics}");
+    assert!(unseeded["tumour_exo"].as_f64().unwrap() > 0.7, "{metrics}");
+    assert!(metrics["pixel_dice"]["background"].as_f64().unwrap() > 0.95);
+    let _ = std::fs::remove_dir_all(&scene);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+fn fixture_copy(name: &str) -> PathBuf {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/handmade_scene");
+    let dst = tmp(name);
+    copy(&src, &dst);
+    dst
+}
+
+fn copy(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for e in std::fs::read_dir(from).unwrap() {
+        let e = e.unwrap();
+        if e.file_type().unwrap().is_dir() {
+            copy(&e.path(), &to.join(e.file_name()));
+        } else {
+            std::fs::copy(e.path(), to.join(e.file_name())).unwrap();
+        }
+    }
+}
+
+fn expect_exit_2(scene: &Path, words: &str) {
+    let out_dir = tmp("unused");
+    let out = Command::new(env!("CARGO_BIN_EXE_endofuse"))
+        .arg("classify")
+        .arg(scene)
+        .arg("--out")
+        .arg(&out_dir)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains(words), "expected '{words}' in: {err}");
+    assert!(!err.contains("panicked"));
+}
+
+#[test]
+fn the_handmade_scene_classifies() {
+    let dir = tmp("handmade");
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/handmade_scene");
+    let out = Command::new(env!("CARGO_BIN_EXE_endofuse"))
+        .arg("classify")
+        .arg(&scene)
+        .arg("--out")
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(dir.join("prob/tumour/right/000001.png").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn missing_seeds_are_refused_naming_the_class() {
+    let d = fixture_copy("noseeds");
+    for cam in ["left", "right"] {
+        std::fs::remove_file(d.join(format!("seeds/{cam}/000000.png"))).unwrap();
+    }
+    expect_exit_2(&d, "no seeds");
+
+    let d = fixture_copy("notumour");
+    for cam in ["left", "right"] {
+        let p = d.join(format!("seeds/{cam}/000000.png"));
+        let mut img = image::open(&p).unwrap().into_luma8();
+        for px in img.pixels_mut() {
+            if px.0[0] == 2 {
+                px.0[0] = 0;
+            }
+        }
+        img.save(&p).unwrap();
+    }
+    expect_exit_2(&d, "no seeded pixel for 'tumour' (label 2)");
+
+    let d = fixture_copy("range");
+    let out = Command::new(env!("CARGO_BIN_EXE_endofuse"))
+        .arg("classify")
+        .arg(&d)
+        .arg("--out")
+        .arg(tmp("r"))
+        .args(["--frames", "1..5"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--frames"));
+}
