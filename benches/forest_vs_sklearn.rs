@@ -71,7 +71,19 @@ fn main() {
         .as_bytes(),
     );
 
-    let params = ForestParams::default();
+    let mut params = ForestParams::default();
+    if let Some(d) = std::env::var("FOREST_DEPTH")
+        .ok()
+        .and_then(|v| v.parse().ok())
+    {
+        params.max_depth = d;
+    }
+    if let Some(d) = std::env::var("FOREST_LEAF")
+        .ok()
+        .and_then(|v| v.parse().ok())
+    {
+        params.min_samples_leaf = d;
+    }
     let s = Instant::now();
     let (forest, stats) = Forest::train(&train, classes.len(), &params).unwrap();
     let ours_train_s = s.elapsed().as_secs_f64();
@@ -112,6 +124,31 @@ fn main() {
             None
         }
     };
+    eprintln!("tree depths: {:?}", forest.depths());
+    if std::env::var_os("FOREST_PROFILE").is_some() {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap();
+        for trees in [1usize, 5, 20] {
+            let (f, _) = Forest::train(
+                &train,
+                classes.len(),
+                &ForestParams {
+                    trees,
+                    ..params.clone()
+                },
+            )
+            .unwrap();
+            let s = Instant::now();
+            pool.install(|| f.predict_many(&test.features));
+            let ns = s.elapsed().as_secs_f64() * 1e9 / test.len() as f64;
+            eprintln!(
+                "1 thread, {trees} trees: {ns:.1} ns per pixel ({:.1} per tree)",
+                ns / trees as f64
+            );
+        }
+    }
     let mean_extract = extract_ms.iter().sum::<f64>() / extract_ms.len() as f64;
     println!(
         "training samples: {} (features of 6 seeded views: {:.2} s); test pixels: {}",

@@ -23,8 +23,8 @@ pub fn structure_colour(index: usize) -> [u8; 3] {
 pub const BACKGROUND_SEED_COLOUR: [u8; 3] = [40, 110, 255];
 
 fn blend(dst: &mut Rgb<u8>, c: [u8; 3], alpha: f32) {
-    for k in 0..3 {
-        dst.0[k] = (dst.0[k] as f32 * (1.0 - alpha) + c[k] as f32 * alpha).round() as u8;
+    for (d, s) in dst.0.iter_mut().zip(c) {
+        *d = (*d as f32 * (1.0 - alpha) + s as f32 * alpha).round() as u8;
     }
 }
 

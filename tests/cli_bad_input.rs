@@ -118,7 +118,8 @@ fn missing_and_malformed_scene_files() {
 
 #[test]
 fn bad_values_in_scene_json() {
-    let cases: Vec<(&str, Box<dyn Fn(&mut serde_json::Value)>, &str)> = vec![
+    type Edit = Box<dyn Fn(&mut serde_json::Value)>;
+    let cases: Vec<(&str, Edit, &str)> = vec![
         (
             "width",
             Box::new(|v| v["cameras"][0]["width"] = 0.into()),

@@ -5,7 +5,7 @@ use endofuse::Scene;
 use endofuse::scene::FrameCheck;
 use endofuse::scene::labels::read_label_png;
 use endofuse::synth::phantom::{Phantom, k1_for_focal};
-use endofuse::synth::{SynthOptions, memory_scene, write_scene};
+use endofuse::synth::{SynthOptions, memory_scene};
 use std::path::Path;
 use std::process::Command;
 

@@ -53,7 +53,7 @@ pub const FEATURE_NAMES: [&str; FEATURE_COUNT] = [
 const HIST_RADIUS_960: f64 = 5.0;
 const SMALL_RADIUS_960: f64 = 3.0;
 const LARGE_RADIUS_960: f64 = 10.0;
-const CONTEXT_RADIUS_960: f64 = 24.0;
+const CONTEXT_RADIUS_960: f64 = 16.0;
 
 /// One pixel's features.
 pub type FeatureVector = [u8; FEATURE_COUNT];
@@ -265,8 +265,8 @@ pub fn downsample(frame: &RgbImage) -> RgbImage {
                 (2 * x + dx).min(frame.width() - 1),
                 (2 * y + dy).min(frame.height() - 1),
             );
-            for k in 0..3 {
-                acc[k] += p.0[k] as u32;
+            for (a, v) in acc.iter_mut().zip(p.0) {
+                *a += v as u32;
             }
         }
         image::Rgb(acc.map(|v| ((v + 2) / 4) as u8))

@@ -40,6 +40,82 @@ pub fn squared_edt(features: &Mask) -> DistanceMap {
     }
 }
 
+/// Squared distance (px²) to the nearest `true` pixel and that pixel's index (y·w + x), for
+/// every pixel; index `u32::MAX` and distance ∞ when there is none. Same two passes as
+/// [`squared_edt`], carrying the argmin: the fit uses it to find, for a band pixel, the contour
+/// pixel (and so the surface point) that moves it.
+pub fn nearest_feature(features: &Mask) -> (DistanceMap, Plane<u32>) {
+    let (w, h) = (features.width, features.height);
+    let mut grid: Vec<f64> = features
+        .data
+        .iter()
+        .map(|&f| if f { 0.0 } else { f64::INFINITY })
+        .collect();
+    // After the column pass: the row of the nearest feature in this column.
+    let mut row_of = vec![u32::MAX; w * h];
+    let n = w.max(h);
+    let (mut f, mut d, mut v, mut z, mut arg) = (
+        vec![0.0; n],
+        vec![0.0; n],
+        vec![0usize; n],
+        vec![0.0; n + 1],
+        vec![0usize; n],
+    );
+    for x in 0..w {
+        for y in 0..h {
+            f[y] = grid[y * w + x];
+        }
+        edt_1d_arg(&f[..h], &mut d[..h], &mut v, &mut z, &mut arg[..h]);
+        for y in 0..h {
+            grid[y * w + x] = d[y];
+            row_of[y * w + x] = if d[y].is_finite() {
+                arg[y] as u32
+            } else {
+                u32::MAX
+            };
+        }
+    }
+    let mut index = vec![u32::MAX; w * h];
+    for y in 0..h {
+        f[..w].copy_from_slice(&grid[y * w..(y + 1) * w]);
+        edt_1d_arg(&f[..w], &mut d[..w], &mut v, &mut z, &mut arg[..w]);
+        for x in 0..w {
+            grid[y * w + x] = d[x];
+            if d[x].is_finite() {
+                let col = arg[x];
+                index[y * w + x] = row_of[y * w + col] * w as u32 + col as u32;
+            }
+        }
+    }
+    (
+        Plane {
+            width: w,
+            height: h,
+            data: grid.into_iter().map(|x| x as f32).collect(),
+        },
+        Plane {
+            width: w,
+            height: h,
+            data: index,
+        },
+    )
+}
+
+fn edt_1d_arg(f: &[f64], d: &mut [f64], v: &mut [usize], z: &mut [f64], arg: &mut [usize]) {
+    edt_1d(f, d, v, z);
+    if d.first().is_none_or(|x| !x.is_finite()) {
+        return;
+    }
+    // Recover the winning parabola per sample by the same envelope walk.
+    let mut k = 0;
+    for (q, a) in arg.iter_mut().enumerate() {
+        while z[k + 1] < q as f64 {
+            k += 1;
+        }
+        *a = v[k];
+    }
+}
+
 /// 1D squared distance transform of the sampled function `f` (∞ = no feature).
 fn edt_1d(f: &[f64], d: &mut [f64], v: &mut [usize], z: &mut [f64]) {
     let n = f.len();
@@ -144,6 +220,30 @@ mod tests {
                 .unwrap();
             let fast = squared_edt(&mask);
             assert_eq!(fast.data, brute_squared(&mask), "{w}x{h} density {density}");
+        }
+    }
+
+    #[test]
+    fn nearest_feature_points_at_a_nearest_pixel() {
+        let mut rng = Rng::new(53);
+        for _ in 0..40 {
+            let (w, h) = (1 + rng.below(40), 1 + rng.below(30));
+            let mask =
+                Plane::from_vec(w, h, (0..w * h).map(|_| rng.uniform() < 0.05).collect()).unwrap();
+            let (dist, index) = nearest_feature(&mask);
+            assert_eq!(dist.data, brute_squared(&mask));
+            for i in 0..w * h {
+                let j = index.data[i];
+                if dist.data[i].is_finite() {
+                    let j = j as usize;
+                    assert!(mask.data[j], "index points at a feature");
+                    let d2 = ((j % w) as f32 - (i % w) as f32).powi(2)
+                        + ((j / w) as f32 - (i / w) as f32).powi(2);
+                    assert_eq!(d2, dist.data[i]);
+                } else {
+                    assert_eq!(j, u32::MAX);
+                }
+            }
         }
     }
 

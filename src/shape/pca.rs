@@ -192,6 +192,7 @@ mod tests {
     }
 
     #[test]
+    #[allow(clippy::needless_range_loop)] // mode index addresses three arrays
     fn matches_brute_force_covariance_eigendecomposition() {
         let mut rng = Rng::new(31);
         let (_, samples) = synthetic_catalog(&mut rng, 12, 25, &[6.0, 3.0, 1.0]);

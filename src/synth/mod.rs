@@ -110,7 +110,7 @@ fn frame_seeds(phantom: &Phantom, truth: &FrameTruth, t: usize) -> Option<Vec<La
             .zip(&truth.tools)
             .enumerate()
             .map(|(m, (labels, tools))| {
-                let mut rng = Rng::fork(phantom.options.seed ^ 0x5EED_5, (t * 64 + m) as u64);
+                let mut rng = Rng::fork(phantom.options.seed ^ 0x0005_EED5, (t * 64 + m) as u64);
                 seeds::seeds_for_view(labels, tools, &visible, &mut rng)
             })
             .collect(),

@@ -121,7 +121,21 @@ pub fn seeds_for_view(
     paint_strokes(&mut seeds, tools, SEED_BACKGROUND, 1, radius, rng);
     for &l in structure_labels {
         let strokes = if l == structure_labels[0] { 3 } else { 2 };
-        paint_strokes(&mut seeds, &labels.mask_of(l), l, strokes, radius, rng);
+        let region = labels.mask_of(l);
+        paint_strokes(&mut seeds, &region, l, strokes, radius, rng);
+        // And one stroke along the inside of its edge, as a careful user traces it.
+        let to_outside = squared_edt(&region.map(|&r| !r));
+        let rim = Plane {
+            width: region.width,
+            height: region.height,
+            data: region
+                .data
+                .iter()
+                .zip(&to_outside.data)
+                .map(|(&r, &d)| r && (d as f64) <= ring_px * ring_px)
+                .collect(),
+        };
+        paint_strokes(&mut seeds, &rim, l, 1, radius, rng);
     }
     seeds
 }
