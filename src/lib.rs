@@ -5,6 +5,7 @@
 pub mod appearance;
 pub mod classify;
 pub mod error;
+pub mod fit;
 pub mod geometry;
 pub mod info;
 pub mod overlay;

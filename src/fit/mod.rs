@@ -1,0 +1,12 @@
+//! The fit (paper §II-B, II-C): the global affine T, the joint shape weights W and the cameras'
+//! intrinsics π that minimise eq. 4 in every view, frame after frame.
+
+pub mod energy;
+pub mod model;
+pub mod optimizer;
+pub mod probability;
+pub mod tracker;
+
+pub use energy::{Block, EnergyParams, FitState, FrameContext};
+pub use model::Model;
+pub use optimizer::{FitParams, FrameFit, Mode, fit_frame};

@@ -1,0 +1,111 @@
+//! The fitted model's geometry: the joint shape instance for weights W (eq. 1), posed by the
+//! global affine T (eq. 2), and each structure's edge–face adjacency, from which the rim
+//! (silhouette-generating edges) is found for any camera.
+
+use crate::geometry::{Affine, Mesh};
+use crate::scene::Scene;
+use crate::shape::JointShapeModel;
+use glam::DVec3;
+use std::collections::HashMap;
+
+/// An edge with the two faces that share it (the second may be missing on open meshes).
+#[derive(Debug, Clone, Copy)]
+pub struct Edge {
+    pub a: u32,
+    pub b: u32,
+    pub faces: [u32; 2],
+    pub boundary: bool,
+}
+
+/// What the fit needs of one structure.
+#[derive(Debug, Clone)]
+pub struct StructureModel {
+    pub name: String,
+    pub label: u8,
+    pub visible: bool,
+    pub faces: Vec<[u32; 3]>,
+    pub edges: Vec<Edge>,
+    /// Index into the joint shape model's parts.
+    pub part: usize,
+}
+
+/// All structures and their joint shape model.
+#[derive(Debug, Clone)]
+pub struct Model {
+    pub structures: Vec<StructureModel>,
+    pub shape: JointShapeModel,
+    /// The structure whose weights name the joint vector in outputs (the organ).
+    pub anchor: usize,
+}
+
+impl Model {
+    pub fn from_scene(scene: &Scene) -> Self {
+        let structures = scene
+            .structures
+            .iter()
+            .enumerate()
+            .map(|(i, s)| StructureModel {
+                name: s.name.clone(),
+                label: s.label,
+                visible: s.visible,
+                faces: s.mesh.faces.clone(),
+                edges: edges(&s.mesh),
+                part: i,
+            })
+            .collect();
+        let anchor = scene
+            .structures
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| s.visible)
+            .max_by_key(|(_, s)| s.mesh.vertices.len())
+            .map(|(i, _)| i)
+            .unwrap_or(0);
+        Self {
+            structures,
+            shape: scene.shape.clone(),
+            anchor,
+        }
+    }
+
+    /// Deformed preoperative vertices of every structure for weights `w`.
+    pub fn deformed(&self, w: &[f64]) -> Vec<Vec<DVec3>> {
+        self.shape.instance(w)
+    }
+
+    /// Vertices in camera-0 coordinates.
+    pub fn posed(&self, affine: &Affine, deformed: &[Vec<DVec3>]) -> Vec<Vec<DVec3>> {
+        deformed
+            .iter()
+            .map(|v| v.iter().map(|&p| affine.apply(p)).collect())
+            .collect()
+    }
+}
+
+fn edges(mesh: &Mesh) -> Vec<Edge> {
+    let mut map: HashMap<(u32, u32), usize> = HashMap::new();
+    let mut out: Vec<Edge> = Vec::new();
+    for (fi, f) in mesh.faces.iter().enumerate() {
+        for k in 0..3 {
+            let (a, b) = (f[k], f[(k + 1) % 3]);
+            let key = (a.min(b), a.max(b));
+            match map.get(&key) {
+                Some(&e) if out[e].boundary => {
+                    out[e].faces[1] = fi as u32;
+                    out[e].boundary = false;
+                }
+                Some(_) => {}
+                None => {
+                    map.insert(key, out.len());
+                    out.push(Edge {
+                        a: key.0,
+                        b: key.1,
+                        faces: [fi as u32, fi as u32],
+                        boundary: true,
+                    });
+                }
+            }
+        }
+    }
+    out
+}

@@ -1,0 +1,83 @@
+//! Forest probabilities of one frame of one view, per pyramid level, computed lazily: only the
+//! pixels the correspondence lines touch are ever classified, which is what makes per-frame
+//! fitting affordable (a whole 960×540 view costs ~100 ms; the lines need a few thousand pixels).
+
+use crate::appearance::features::downsample;
+use crate::appearance::{Appearance, FrameFeatures};
+use image::RgbImage;
+use std::sync::Arc;
+
+struct Level {
+    image: Arc<RgbImage>,
+    features: Option<FrameFeatures>,
+    /// `classes` probabilities per pixel; NaN where not yet computed.
+    probs: Vec<f32>,
+}
+
+/// Lazily classified pyramid of one view's frame.
+pub struct ViewProbabilities {
+    levels: Vec<Level>,
+    classes: usize,
+}
+
+impl ViewProbabilities {
+    pub fn new(frame: Arc<RgbImage>, levels: usize, classes: usize) -> Self {
+        let mut out: Vec<Level> = Vec::new();
+        let mut img = frame;
+        for l in 0..levels.max(1) {
+            if l > 0 {
+                img = Arc::new(downsample(&img));
+            }
+            let n = img.width() as usize * img.height() as usize;
+            out.push(Level {
+                image: img.clone(),
+                features: None,
+                probs: vec![f32::NAN; n * classes],
+            });
+        }
+        Self {
+            levels: out,
+            classes,
+        }
+    }
+
+    pub fn level_count(&self) -> usize {
+        self.levels.len()
+    }
+
+    pub fn size(&self, level: usize) -> (usize, usize) {
+        let img = &self.levels[level].image;
+        (img.width() as usize, img.height() as usize)
+    }
+
+    /// Classifies the listed pixel indices of `level` that are not known yet.
+    pub fn ensure(&mut self, appearance: &Appearance, level: usize, pixels: &[u32]) {
+        let k = self.classes;
+        let lv = &mut self.levels[level];
+        let w = lv.image.width();
+        let mut missing: Vec<u32> = pixels
+            .iter()
+            .copied()
+            .filter(|&i| lv.probs[i as usize * k].is_nan())
+            .collect();
+        if missing.is_empty() {
+            return;
+        }
+        missing.sort_unstable();
+        missing.dedup();
+        let features = lv
+            .features
+            .get_or_insert_with(|| FrameFeatures::new(&lv.image));
+        let coords: Vec<(u32, u32)> = missing.iter().map(|&i| (i % w, i / w)).collect();
+        let p = appearance.classify_pixels(features, &coords);
+        for (j, &i) in missing.iter().enumerate() {
+            lv.probs[i as usize * k..(i as usize + 1) * k].copy_from_slice(&p[j * k..(j + 1) * k]);
+        }
+    }
+
+    /// Probability of `class` at a pixel index of `level` (must have been ensured).
+    #[inline]
+    pub fn get(&self, level: usize, pixel: u32, class: usize) -> f32 {
+        self.levels[level].probs[pixel as usize * self.classes + class]
+    }
+}
