@@ -15,6 +15,7 @@ pub mod rng;
 pub mod scene;
 pub mod shape;
 pub mod synth;
+pub mod track;
 
 pub use error::{Error, InputError, Result};
 pub use scene::Scene;

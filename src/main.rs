@@ -41,6 +41,18 @@ enum Command {
         #[arg(long, default_value_t = 20)]
         trees: usize,
     },
+    /// Train the forest, initialise, track every frame; write masks, trajectory and metrics.
+    Track {
+        scene: String,
+        #[arg(long)]
+        out: PathBuf,
+        /// R (rigid), L (affine), LS (affine + shape), LSC (+ camera intrinsics under zoom).
+        #[arg(long, default_value = "LS")]
+        mode: String,
+        /// Inclusive 0-based frame range, e.g. 0..29 (default: all frames).
+        #[arg(long)]
+        frames: Option<String>,
+    },
     /// Write a synthetic stereo endoscopic phantom scene with ground truth.
     Synth {
         #[arg(long)]
@@ -141,6 +153,54 @@ fn run(cli: Cli) -> Result<()> {
             );
             for (class, d) in &metrics.pixel_dice {
                 eprintln!("classify: pixel Dice {class}: {d:.3}");
+            }
+            Ok(())
+        }
+        Some(Command::Track {
+            scene,
+            out,
+            mode,
+            frames,
+        }) => {
+            let mode = endofuse::fit::Mode::parse(&mode).ok_or_else(|| {
+                endofuse::InputError::new("--mode", format!("'{mode}' is not one of R, L, LS, LSC"))
+            })?;
+            let scene = Scene::open(&scene, FrameCheck::Headers)?;
+            let range = frame_range(frames.as_deref(), scene.frame_count)?;
+            let m = endofuse::track::run(&scene, &out, mode, range, None, &progress("track"))?;
+            eprintln!(
+                "track: {} frames in mode {}, {} lost; {:.1} ms per frame (median), forest trained in {:.2} s",
+                m.frames,
+                m.mode,
+                m.lost_frames,
+                m.timing.ms_per_frame.median,
+                m.timing.forest_train_s
+            );
+            if let Some(d) = &m.dice {
+                let by: Vec<String> = d
+                    .by_structure
+                    .iter()
+                    .map(|(k, v)| format!("{k} {v:.3}"))
+                    .collect();
+                eprintln!("track: Dice {:.3} ({})", d.mean, by.join(", "));
+            }
+            for (name, h) in &m.hidden {
+                eprintln!(
+                    "track: hidden {name}: centroid error {:.2} mm (max {:.2}){}",
+                    h.centroid_error_mm_mean,
+                    h.centroid_error_mm_max,
+                    h.dice_mean
+                        .map(|d| format!(", Dice {d:.3}"))
+                        .unwrap_or_default()
+                );
+            }
+            if let Some(c) = &m.camera {
+                eprintln!(
+                    "track: fx error {:.2} % (max {:.2} %), cx error {:.2} px",
+                    100.0 * c.fx_rel_error_mean,
+                    100.0 * c.fx_rel_error_max,
+                    c.cx_error_px_mean
+                );
             }
             Ok(())
         }

@@ -184,6 +184,30 @@ fn seeds_origin(scene: &Scene) -> String {
     }
 }
 
+/// Pyramid levels whose features train the forest (the fit's levels 0–2).
+pub const TRAINING_LEVELS: usize = 3;
+
+/// Halves a seed image: a pixel keeps a value only where its 2×2 children all have it.
+fn downsample_seeds(seeds: &LabelImage) -> LabelImage {
+    let (w, h) = ((seeds.width / 2).max(1), (seeds.height / 2).max(1));
+    let mut out = Plane::filled(w, h, SEED_NONE);
+    for y in 0..h {
+        for x in 0..w {
+            let v = *seeds.get((2 * x).min(seeds.width - 1), (2 * y).min(seeds.height - 1));
+            let same = [(1, 0), (0, 1), (1, 1)].iter().all(|&(dx, dy)| {
+                *seeds.get(
+                    (2 * x + dx).min(seeds.width - 1),
+                    (2 * y + dy).min(seeds.height - 1),
+                ) == v
+            });
+            if same {
+                out.set(x, y, v);
+            }
+        }
+    }
+    out
+}
+
 /// Feature vectors and classes of all seeded pixels. Errors name the seeds and the class.
 pub fn collect_samples(
     scene: &Scene,
@@ -227,17 +251,24 @@ pub fn collect_samples(
                 )
                 .into());
             }
-            let ff = FrameFeatures::new(&frame);
-            Ok(seeds
-                .data
-                .iter()
-                .enumerate()
-                .filter_map(|(i, &v)| {
+            // Every pyramid level the fit visits: coarse levels see smoother images, so the
+            // forest must learn them too (a coarse pixel is seeded where its 4 children agree).
+            let mut out = Vec::new();
+            let mut img = (*frame).clone();
+            let mut lab = seeds.clone();
+            for level in 0..TRAINING_LEVELS {
+                if level > 0 {
+                    img = features::downsample(&img);
+                    lab = downsample_seeds(&lab);
+                }
+                let ff = FrameFeatures::new(&img);
+                out.extend(lab.data.iter().enumerate().filter_map(|(i, &v)| {
                     classes
                         .class_of_seed(v)
-                        .map(|k| (ff.at(i % seeds.width, i / seeds.width), k as u8))
-                })
-                .collect())
+                        .map(|k| (ff.at(i % lab.width, i / lab.width), k as u8))
+                }));
+            }
+            Ok(out)
         })
         .collect();
     let mut by_class: Vec<Vec<features::FeatureVector>> = vec![Vec::new(); classes.len()];

@@ -2,6 +2,7 @@
 //! intrinsics π that minimise eq. 4 in every view, frame after frame.
 
 pub mod energy;
+pub mod init;
 pub mod model;
 pub mod optimizer;
 pub mod probability;

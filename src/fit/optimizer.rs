@@ -8,7 +8,8 @@
 use super::energy::{Block, EnergyParams, FitState, FrameContext, Line, apply_increment};
 use super::probability::ViewProbabilities;
 use crate::appearance::Appearance;
-use glam::DVec2;
+use crate::geometry::Affine;
+use glam::{DVec2, DVec3};
 use nalgebra::{DMatrix, DVector};
 
 /// The paper's settings: rigid, affine, affine + shape, affine + shape + cameras.
@@ -56,6 +57,10 @@ pub struct FitParams {
     pub shape_prior: f64,
     /// Relative Tikhonov damping of the camera block (camera parameters move slowly).
     pub camera_damping: f64,
+    /// Weight (relative to the data) pulling the affine's linear part towards a rotation.
+    pub strain_prior: f64,
+    /// Tikhonov weight (relative to the data) towards the previous frame's pose.
+    pub pose_damping: f64,
 }
 
 impl Default for FitParams {
@@ -66,8 +71,10 @@ impl Default for FitParams {
             rounds: 2,
             steps: 3,
             lm: 0.05,
-            shape_prior: 30.0,
+            shape_prior: 300.0,
             camera_damping: 1.0,
+            strain_prior: 1.0,
+            pose_damping: 1.0,
         }
     }
 }
@@ -178,7 +185,65 @@ fn step(
     for k in 0..n {
         h[(k, k)] += params.lm * h[(k, k)] + 1e-6 * max_diag;
     }
+    // Tikhonov towards the previous frame's pose (isotropic per group, relative to the data):
+    // silhouettes leave some rotations and depth nearly free; the damping keeps them still
+    // unless the data move them.
+    let groups: &[(std::ops::Range<usize>, Vec<f64>)] = &match block {
+        Block::Rigid => {
+            let centre = ctx.model_centre(&deformed);
+            let dev_rot = crate::geometry::pose::rotation_to_vector(
+                crate::geometry::pose::nearest_rotation(
+                    state.affine.linear() * prev.affine.linear().inverse(),
+                )
+                .unwrap_or(glam::DMat3::IDENTITY),
+            );
+            let dev_t = state.affine.apply(centre) - prev.affine.apply(centre);
+            vec![
+                (0..3, dev_rot.to_array().to_vec()),
+                (3..6, dev_t.to_array().to_vec()),
+            ]
+        }
+        Block::Affine => vec![
+            (
+                0..9,
+                (0..9)
+                    .map(|k| state.affine.q[k] - prev.affine.q[k])
+                    .collect(),
+            ),
+            (
+                9..12,
+                (9..12)
+                    .map(|k| state.affine.q[k] - prev.affine.q[k])
+                    .collect(),
+            ),
+        ],
+        _ => Vec::new(),
+    };
+    for (g, (range, dev)) in groups.iter().enumerate() {
+        // Rotations and the linear part: one weight for the group, so weakly observed
+        // directions are held as firmly as the rest. Translation: per axis, relative to its own
+        // information, so depth (seen only through size and disparity) still converges.
+        let group_mean = range.clone().map(|k| h[(k, k)]).sum::<f64>() / range.len() as f64;
+        for (k, d) in range.clone().zip(dev) {
+            let lam = params.pose_damping * if g == 0 { group_mean } else { h[(k, k)] };
+            h[(k, k)] += lam;
+            b[k] -= lam * d;
+        }
+    }
     match block {
+        Block::Affine => {
+            // Strain prior: silhouettes barely see stretch along the optical axis against depth,
+            // so pull the linear part towards its nearest rotation (CT is metric); real tissue
+            // stretch survives where the data insist.
+            if let Some(rot) = crate::geometry::pose::nearest_rotation(state.affine.linear()) {
+                let target = Affine::from_linear_translation(rot, DVec3::ZERO);
+                let lam = params.strain_prior * (0..9).map(|k| h[(k, k)]).sum::<f64>() / 9.0;
+                for k in 0..9 {
+                    h[(k, k)] += lam;
+                    b[k] -= lam * (state.affine.q[k] - target.q[k]);
+                }
+            }
+        }
         Block::Shape => {
             let sigma = &ctx.model.shape.pca.sigma_mm;
             for k in 0..n {
@@ -203,10 +268,36 @@ fn step(
     if delta.iter().any(|v| !v.is_finite()) {
         return None;
     }
+    // Accept only steps that lower the energy on these lines (plus the block's priors), halving
+    // the step up to twice: the line targets are a linearisation and can overshoot.
     let centre = ctx.model_centre(&deformed);
-    let mut next = apply_increment(state, block, delta.as_slice(), centre);
-    ctx.model.shape.pca.clamp_weights(&mut next.shape);
-    Some(next)
+    let objective =
+        |st: &FitState| ctx.energy(lines, st, ep) + prior_energy(ctx, st, block, params);
+    let before = objective(state);
+    let mut scale = 1.0;
+    for _ in 0..3 {
+        let scaled: Vec<f64> = delta.iter().map(|d| d * scale).collect();
+        let mut next = apply_increment(state, block, &scaled, centre);
+        ctx.model.shape.pca.clamp_weights(&mut next.shape);
+        if objective(&next) < before {
+            return Some(next);
+        }
+        scale *= 0.5;
+    }
+    None
+}
+
+/// The priors' energy in the same units the step's normal equations use.
+fn prior_energy(ctx: &FrameContext, state: &FitState, block: Block, params: &FitParams) -> f64 {
+    match block {
+        Block::Shape => state
+            .shape
+            .iter()
+            .zip(&ctx.model.shape.pca.sigma_mm)
+            .map(|(w, s)| 0.5 * params.shape_prior * (w / s.max(1e-9)).powi(2))
+            .sum(),
+        _ => 0.0,
+    }
 }
 
 /// Fits one frame from `start`; `prev` anchors the damping. `correct_cameras` enables the π
@@ -230,9 +321,17 @@ pub fn fit_frame(
     if matches!(params.mode, Mode::LS | Mode::LSC) && ctx.model.shape.mode_count() > 0 {
         blocks.push(Block::Shape);
     }
+    let mut params = params.clone();
     if params.mode == Mode::LSC && correct_cameras {
-        blocks.extend((0..ctx.cameras.len()).map(Block::Camera));
+        // Zooming in and moving closer look alike in one frame; the organ moves slowly while
+        // the zoom changes fast, so during a zoom the cameras go first and the pose is held
+        // harder: the change is explained by the intrinsics.
+        let cams: Vec<Block> = (0..ctx.cameras.len()).map(Block::Camera).collect();
+        blocks.splice(0..0, cams);
+        params.pose_damping *= 10.0;
+        params.camera_damping *= 0.1;
     }
+    let params = &params;
     let levels: Vec<usize> = params
         .levels
         .iter()

@@ -1,0 +1,207 @@
+//! Automatic initialisation when a scene gives no `initial_pose`: the forest's probability
+//! maps of the first frame locate the organ (centroid and area in every view); orientation
+//! hypotheses (26 view directions × 8 rolls) are placed on the centroid's ray at the depth their
+//! silhouette area implies and scored by soft overlap with the forest's foreground in all views;
+//! the best few are refined by a coarse rigid fit and the most confident wins. The paper needed
+//! a rough manual placement; this needs none.
+
+use super::energy::{FitState, FrameContext, level_camera};
+use super::model::Model;
+use super::optimizer::{FitParams, Mode, fit_frame};
+use super::probability::ViewProbabilities;
+use crate::appearance::features::downsample;
+use crate::appearance::{Appearance, ClassMap};
+use crate::error::{Error, InputError};
+use crate::geometry::pose::rotation_from_vector;
+use crate::geometry::{Affine, Camera};
+use crate::plane::Plane;
+use crate::render::raster::{RasterOptions, RenderObject, rasterize};
+use crate::scene::Scene;
+use glam::{DMat3, DVec2, DVec3};
+use std::sync::Arc;
+
+const LEVEL: usize = 2;
+const REFINED: usize = 4;
+
+/// Unit directions spread over the sphere (Fibonacci lattice).
+fn directions(n: usize) -> Vec<DVec3> {
+    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+    (0..n)
+        .map(|i| {
+            let y = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+            let r = (1.0 - y * y).sqrt();
+            DVec3::new(
+                r * (golden * i as f64).cos(),
+                y,
+                r * (golden * i as f64).sin(),
+            )
+        })
+        .collect()
+}
+
+/// Rotation taking +z to `d`.
+fn align_z(d: DVec3) -> DMat3 {
+    let axis = DVec3::Z.cross(d);
+    let s = axis.length();
+    let c = DVec3::Z.dot(d);
+    if s < 1e-9 {
+        return if c > 0.0 {
+            DMat3::IDENTITY
+        } else {
+            rotation_from_vector(DVec3::X * std::f64::consts::PI)
+        };
+    }
+    rotation_from_vector(axis / s * s.atan2(c))
+}
+
+fn foreground(appearance: &Appearance, frame: &image::RgbImage) -> Plane<f32> {
+    // Probability of any structure = 1 − P(background).
+    appearance
+        .classify_frame(frame)
+        .class_plane(0)
+        .map(|&p| 1.0 - p)
+}
+
+fn soft_iou(prob: &Plane<f32>, silhouette: &Plane<bool>) -> f64 {
+    let (mut inter, mut sp, mut ss) = (0.0, 0.0, 0.0);
+    for (&p, &s) in prob.data.iter().zip(&silhouette.data) {
+        sp += p as f64;
+        if s {
+            ss += 1.0;
+            inter += p as f64;
+        }
+    }
+    inter / (sp + ss - inter).max(1e-9)
+}
+
+/// Estimates the pose of frame `t` from the forest alone.
+pub fn automatic_pose(
+    scene: &Scene,
+    model: &Model,
+    appearance: &Appearance,
+    t: usize,
+) -> Result<Affine, Error> {
+    let frames: Vec<Arc<image::RgbImage>> = (0..scene.cameras.len())
+        .map(|c| scene.frame(c, t))
+        .collect::<Result<_, _>>()?;
+    let small: Vec<image::RgbImage> = frames.iter().map(|f| downsample(&downsample(f))).collect();
+    let probs: Vec<Plane<f32>> = small.iter().map(|f| foreground(appearance, f)).collect();
+    let cams: Vec<Camera> = scene
+        .cameras
+        .iter()
+        .zip(&small)
+        .map(|(c, s)| {
+            level_camera(
+                c,
+                &c.intrinsics,
+                LEVEL,
+                (s.width() as usize, s.height() as usize),
+            )
+        })
+        .collect();
+    let p0 = &probs[0];
+    let (mut area, mut centre) = (0.0, DVec2::ZERO);
+    for (i, &p) in p0.data.iter().enumerate() {
+        if p > 0.5 {
+            area += 1.0;
+            centre += DVec2::new((i % p0.width) as f64, (i / p0.width) as f64);
+        }
+    }
+    if area < 20.0 {
+        return Err(InputError::new(&scene.origin, format!("cannot find the organ in frame {t} to place the model automatically: add seeds, or give an initial_pose")).into());
+    }
+    centre /= area;
+    let ray = cams[0].intrinsics.unproject(centre);
+    let ray = DVec3::new(ray.x, ray.y, 1.0);
+    let mean = model.deformed(&vec![0.0; model.shape.mode_count()]);
+    let centre_pre = crate::geometry::mesh::vertex_mean(&mean[model.anchor]);
+    let visible: Vec<usize> = (0..model.structures.len())
+        .filter(|&i| model.structures[i].visible)
+        .collect();
+    let silhouettes = |affine: &Affine, cams: &[Camera]| -> Vec<Plane<bool>> {
+        let posed = model.posed(affine, &mean);
+        let objects: Vec<RenderObject> = visible
+            .iter()
+            .map(|&i| RenderObject {
+                vertices: &posed[i],
+                faces: &model.structures[i].faces,
+            })
+            .collect();
+        cams.iter()
+            .map(|c| rasterize(c, &objects, &RasterOptions::default()).coverage())
+            .collect()
+    };
+    let place = |rot: DMat3, depth: f64| {
+        Affine::from_linear_translation(rot, ray * depth - rot * centre_pre)
+    };
+    let mut scored: Vec<(f64, Affine)> = Vec::new();
+    for d in directions(26) {
+        for roll in 0..8 {
+            let rot =
+                rotation_from_vector(d * (roll as f64 * std::f64::consts::FRAC_PI_4)) * align_z(d);
+            // Depth from the area: projected area falls with the square of depth.
+            let z_ref = 200.0;
+            let reference = silhouettes(&place(rot, z_ref), &cams[..1]);
+            let a_ref = reference[0].count() as f64;
+            if a_ref < 1.0 {
+                continue;
+            }
+            let affine = place(rot, z_ref * (a_ref / area).sqrt());
+            let score: f64 = silhouettes(&affine, &cams)
+                .iter()
+                .zip(&probs)
+                .map(|(s, p)| soft_iou(p, s))
+                .sum::<f64>()
+                / cams.len() as f64;
+            scored.push((score, affine));
+        }
+    }
+    scored.sort_by(|a, b| b.0.total_cmp(&a.0));
+    // Refine the best few rigidly at coarse levels; keep the most confident.
+    let classes = ClassMap::from_scene(scene);
+    let ctx = FrameContext {
+        model,
+        cameras: &scene.cameras,
+        class_of: scene
+            .structures
+            .iter()
+            .map(|s| {
+                if s.visible {
+                    classes.class_of_label(s.label)
+                } else {
+                    None
+                }
+            })
+            .collect(),
+    };
+    let params = FitParams {
+        mode: Mode::R,
+        levels: vec![2, 1],
+        rounds: 4,
+        steps: 3,
+        ..FitParams::default()
+    };
+    let mut best: Option<(f64, Affine)> = None;
+    for (_, affine) in scored.into_iter().take(REFINED) {
+        let mut views: Vec<ViewProbabilities> = frames
+            .iter()
+            .map(|f| ViewProbabilities::new(f.clone(), 3, classes.len()))
+            .collect();
+        let start = FitState {
+            affine,
+            shape: vec![0.0; model.shape.mode_count()],
+            intrinsics: scene.cameras.iter().map(|c| c.intrinsics).collect(),
+        };
+        let fit = fit_frame(&ctx, &start, &start, &mut views, appearance, &params, false);
+        if best.as_ref().is_none_or(|(c, _)| fit.confidence > *c) {
+            best = Some((fit.confidence, fit.state.affine));
+        }
+    }
+    best.map(|(_, a)| a).ok_or_else(|| {
+        InputError::new(
+            &scene.origin,
+            format!("no orientation of the model fits frame {t}: give an initial_pose"),
+        )
+        .into()
+    })
+}

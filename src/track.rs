@@ -1,0 +1,251 @@
+//! `endofuse track` (CONTRACT §1, §3): trains the forest on the seeds, starts from the scene's
+//! initial pose (or estimates one), tracks every frame, and writes visible masks, hidden
+//! structures' projections, trajectory.json and metrics.json (Dice, hidden-structure Dice and
+//! centroid error, camera errors, timing) where ground truth exists.
+
+use crate::appearance::{Appearance, ForestParams};
+use crate::error::{Error, InputError};
+use crate::fit::Model;
+use crate::fit::optimizer::Mode;
+use crate::fit::tracker::{TrackOptions, TrackedFrame, initial_state, track};
+use crate::plane::dice;
+use crate::scene::labels::read_label_png;
+use crate::scene::write::{write_json_atomic, write_labels};
+use crate::scene::{Scene, Trajectory, TrajectoryFrame};
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::sync::atomic::AtomicBool;
+
+#[derive(Debug, Clone, Serialize)]
+pub struct DiceSummary {
+    pub mean: f64,
+    pub by_structure: BTreeMap<String, f64>,
+    pub per_frame: Vec<f64>,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct HiddenMetrics {
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub dice_mean: Option<f64>,
+    pub centroid_error_mm_mean: f64,
+    pub centroid_error_mm_max: f64,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct CameraMetrics {
+    pub fx_rel_error_mean: f64,
+    pub cx_error_px_mean: f64,
+    pub fx_rel_error_max: f64,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct Percentiles {
+    pub median: f64,
+    pub p95: f64,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct Timing {
+    pub forest_train_s: f64,
+    pub ms_per_frame: Percentiles,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct TrackMetrics {
+    pub mode: String,
+    pub frames: usize,
+    pub lost_frames: usize,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub dice: Option<DiceSummary>,
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub hidden: BTreeMap<String, HiddenMetrics>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub camera: Option<CameraMetrics>,
+    pub timing: Timing,
+}
+
+fn mean(v: &[f64]) -> f64 {
+    if v.is_empty() {
+        f64::NAN
+    } else {
+        v.iter().sum::<f64>() / v.len() as f64
+    }
+}
+
+fn percentile(v: &[f64], q: f64) -> f64 {
+    let mut s = v.to_vec();
+    s.sort_by(f64::total_cmp);
+    if s.is_empty() {
+        return f64::NAN;
+    }
+    s[((s.len() - 1) as f64 * q).round() as usize]
+}
+
+/// Runs the whole command; `progress(done, total)` as frames finish.
+pub fn run(
+    scene: &Scene,
+    out: &Path,
+    mode: Mode,
+    frames: (usize, usize),
+    cancel: Option<&AtomicBool>,
+    progress: &dyn Fn(usize, usize),
+) -> Result<TrackMetrics, Error> {
+    let appearance = Appearance::train(scene, &ForestParams::default(), cancel)?;
+    let model = Model::from_scene(scene);
+    let affine = match scene.initial_pose {
+        Some(a) => a,
+        None => crate::fit::init::automatic_pose(scene, &model, &appearance, frames.0)?,
+    };
+    let start = initial_state(scene, &model, affine);
+    let options = TrackOptions::new(mode, frames);
+    let total = frames.1 + 1 - frames.0;
+    let anchor_name = model.structures[model.anchor].name.clone();
+    let mut trajectory = Trajectory::default();
+    let mut per_frame_dice = Vec::new();
+    let mut by_structure: BTreeMap<String, Vec<f64>> = BTreeMap::new();
+    let mut all_dice = Vec::new();
+    let mut hidden_dice: BTreeMap<String, Vec<f64>> = BTreeMap::new();
+    let mut centroid_err: BTreeMap<String, Vec<f64>> = BTreeMap::new();
+    let (mut fx_err, mut cx_err) = (Vec::new(), Vec::new());
+    let mut ms = Vec::new();
+    let mut lost_frames = 0;
+    let gt_traj = scene.ground_truth.trajectory.as_ref();
+    let mut on_frame = |f: TrackedFrame| -> Result<(), Error> {
+        let t = f.frame;
+        for (c, cam) in scene.cameras.iter().enumerate() {
+            write_labels(
+                &out.join(format!("masks/{}/{t:06}.png", cam.name)),
+                &f.labels[c],
+            )?;
+            for (name, masks) in &f.hidden {
+                write_labels(
+                    &out.join(format!("hidden/{name}/{}/{t:06}.png", cam.name)),
+                    &masks[c].map(|&b| if b { 255 } else { 0 }),
+                )?;
+            }
+        }
+        // Dice per camera and visible structure where truth or prediction is non-empty.
+        let mut frame_scores = Vec::new();
+        for (c, cam) in scene.cameras.iter().enumerate() {
+            if let Some(gt) = scene.ground_truth_labels(c, t) {
+                let gt = gt?;
+                for s in scene.structures.iter().filter(|s| s.visible) {
+                    if let Some(d) = dice(&f.labels[c].mask_of(s.label), &gt.mask_of(s.label)) {
+                        frame_scores.push(d);
+                        by_structure.entry(s.name.clone()).or_default().push(d);
+                    }
+                }
+            }
+            for (name, masks) in &f.hidden {
+                let path = match (&scene.ground_truth.hidden, &scene.root) {
+                    (Some(tpl), Some(root)) => root.join(tpl.expand(t, &cam.name, name)),
+                    _ => continue,
+                };
+                if path.exists() {
+                    let gt = read_label_png(&path)?;
+                    if gt.width != masks[c].width || gt.height != masks[c].height {
+                        return Err(InputError::new(
+                            &path,
+                            format!(
+                                "hidden-structure mask is {}×{} but the camera is {}×{}",
+                                gt.width, gt.height, masks[c].width, masks[c].height
+                            ),
+                        )
+                        .into());
+                    }
+                    if let Some(d) = dice(&masks[c], &gt.map(|&v| v >= 128)) {
+                        hidden_dice.entry(name.clone()).or_default().push(d);
+                    }
+                }
+            }
+        }
+        if !frame_scores.is_empty() {
+            per_frame_dice.push(mean(&frame_scores));
+            all_dice.extend(frame_scores);
+        }
+        if let Some(truth) = gt_traj.and_then(|g| g.get(t)) {
+            for (name, c) in &f.centroids {
+                if let Some(tc) = truth.centroids.get(name) {
+                    centroid_err
+                        .entry(name.clone())
+                        .or_default()
+                        .push((*c - glam::DVec3::from_array(*tc)).length());
+                }
+            }
+            for (est, tru) in f.state.intrinsics.iter().zip(&truth.cameras) {
+                fx_err.push((est.fx - tru.fx).abs() / tru.fx);
+                cx_err.push((est.cx - tru.cx).abs());
+            }
+        }
+        ms.push(f.ms);
+        lost_frames += f.lost as usize;
+        trajectory.frames.push(TrajectoryFrame {
+            frame: t as u32,
+            affine: f.state.affine.q.to_vec(),
+            shape: BTreeMap::from([(anchor_name.clone(), f.state.shape.clone())]),
+            cameras: f.state.intrinsics.clone(),
+            centroids: f
+                .centroids
+                .iter()
+                .map(|(n, c)| (n.clone(), c.to_array()))
+                .collect(),
+            energy: Some(f.energy),
+            iterations: Some(f.iterations),
+            ms: Some(f.ms),
+            confidence: Some(f.confidence),
+            lost: Some(f.lost),
+        });
+        progress(trajectory.frames.len(), total);
+        Ok(())
+    };
+    track(scene, &appearance, start, &options, cancel, &mut on_frame)?;
+    write_json_atomic(&out.join("trajectory.json"), &trajectory)?;
+    let hidden: BTreeMap<String, HiddenMetrics> = centroid_err
+        .iter()
+        .filter(|(name, _)| {
+            scene
+                .structures
+                .iter()
+                .any(|s| &s.name == *name && !s.visible)
+        })
+        .map(|(name, errs)| {
+            (
+                name.clone(),
+                HiddenMetrics {
+                    dice_mean: hidden_dice.get(name).map(|v| mean(v)),
+                    centroid_error_mm_mean: mean(errs),
+                    centroid_error_mm_max: errs.iter().cloned().fold(0.0, f64::max),
+                },
+            )
+        })
+        .collect();
+    let metrics = TrackMetrics {
+        mode: mode.name().into(),
+        frames: total,
+        lost_frames,
+        dice: (!all_dice.is_empty()).then(|| DiceSummary {
+            mean: mean(&all_dice),
+            by_structure: by_structure
+                .iter()
+                .map(|(k, v)| (k.clone(), mean(v)))
+                .collect(),
+            per_frame: per_frame_dice.clone(),
+        }),
+        hidden,
+        camera: (!fx_err.is_empty()).then(|| CameraMetrics {
+            fx_rel_error_mean: mean(&fx_err),
+            cx_error_px_mean: mean(&cx_err),
+            fx_rel_error_max: fx_err.iter().cloned().fold(0.0, f64::max),
+        }),
+        timing: Timing {
+            forest_train_s: appearance.stats.train_s,
+            ms_per_frame: Percentiles {
+                median: percentile(&ms, 0.5),
+                p95: percentile(&ms, 0.95),
+            },
+        },
+    };
+    write_json_atomic(&out.join("metrics.json"), &metrics)?;
+    Ok(metrics)
+}
