@@ -15,7 +15,7 @@ use crate::error::{Error, InputError};
 use crate::geometry::pose::rotation_from_vector;
 use crate::geometry::{Affine, Camera};
 use crate::plane::Plane;
-use crate::render::raster::{RasterOptions, RenderObject, rasterize};
+use crate::render::raster::{RasterOptions, RenderObject, ViewRaster, rasterize};
 use crate::scene::Scene;
 use glam::{DMat3, DVec2, DVec3};
 use std::sync::Arc;
@@ -54,12 +54,11 @@ fn align_z(d: DVec3) -> DMat3 {
     rotation_from_vector(axis / s * s.atan2(c))
 }
 
-fn foreground(appearance: &Appearance, frame: &image::RgbImage) -> Plane<f32> {
-    // Probability of any structure = 1 − P(background).
-    appearance
-        .classify_frame(frame)
-        .class_plane(0)
-        .map(|&p| 1.0 - p)
+/// Per view: the probability of any structure (1 − P(background)), then of each class.
+fn class_planes(appearance: &Appearance, frame: &image::RgbImage) -> (Plane<f32>, Vec<Plane<f32>>) {
+    let maps = appearance.classify_frame(frame);
+    let planes: Vec<Plane<f32>> = (0..maps.classes).map(|k| maps.class_plane(k)).collect();
+    (planes[0].map(|&p| 1.0 - p), planes)
 }
 
 fn soft_iou(prob: &Plane<f32>, silhouette: &Plane<bool>) -> f64 {
@@ -85,7 +84,9 @@ pub fn automatic_pose(
         .map(|c| scene.frame(c, t))
         .collect::<Result<_, _>>()?;
     let small: Vec<image::RgbImage> = frames.iter().map(|f| downsample(&downsample(f))).collect();
-    let probs: Vec<Plane<f32>> = small.iter().map(|f| foreground(appearance, f)).collect();
+    let (probs, per_class): (Vec<Plane<f32>>, Vec<Vec<Plane<f32>>>) =
+        small.iter().map(|f| class_planes(appearance, f)).unzip();
+    let classes = ClassMap::from_scene(scene);
     let cams: Vec<Camera> = scene
         .cameras
         .iter()
@@ -118,7 +119,7 @@ pub fn automatic_pose(
     let visible: Vec<usize> = (0..model.structures.len())
         .filter(|&i| model.structures[i].visible)
         .collect();
-    let silhouettes = |affine: &Affine, cams: &[Camera]| -> Vec<Plane<bool>> {
+    let rasters = |affine: &Affine, cams: &[Camera]| -> Vec<ViewRaster> {
         let posed = model.posed(affine, &mean);
         let objects: Vec<RenderObject> = visible
             .iter()
@@ -128,8 +129,24 @@ pub fn automatic_pose(
             })
             .collect();
         cams.iter()
-            .map(|c| rasterize(c, &objects, &RasterOptions::default()).coverage())
+            .map(|c| rasterize(c, &objects, &RasterOptions::default()))
             .collect()
+    };
+    // Each visible structure's region against its own class: the exophytic tumour tells a
+    // kidney from its mirror image, which the outline alone cannot.
+    let score = |rs: &[ViewRaster]| -> f64 {
+        let mut total = 0.0;
+        let mut n = 0;
+        for (m, r) in rs.iter().enumerate() {
+            for (oi, &si) in visible.iter().enumerate() {
+                let Some(k) = classes.class_of_label(model.structures[si].label) else {
+                    continue;
+                };
+                total += soft_iou(&per_class[m][k], &r.visible_mask(oi as u8));
+                n += 1;
+            }
+        }
+        total / n.max(1) as f64
     };
     let place = |rot: DMat3, depth: f64| {
         Affine::from_linear_translation(rot, ray * depth - rot * centre_pre)
@@ -141,24 +158,17 @@ pub fn automatic_pose(
                 rotation_from_vector(d * (roll as f64 * std::f64::consts::FRAC_PI_4)) * align_z(d);
             // Depth from the area: projected area falls with the square of depth.
             let z_ref = 200.0;
-            let reference = silhouettes(&place(rot, z_ref), &cams[..1]);
-            let a_ref = reference[0].count() as f64;
+            let reference = rasters(&place(rot, z_ref), &cams[..1]);
+            let a_ref = reference[0].coverage().count() as f64;
             if a_ref < 1.0 {
                 continue;
             }
             let affine = place(rot, z_ref * (a_ref / area).sqrt());
-            let score: f64 = silhouettes(&affine, &cams)
-                .iter()
-                .zip(&probs)
-                .map(|(s, p)| soft_iou(p, s))
-                .sum::<f64>()
-                / cams.len() as f64;
-            scored.push((score, affine));
+            scored.push((score(&rasters(&affine, &cams)), affine));
         }
     }
     scored.sort_by(|a, b| b.0.total_cmp(&a.0));
     // Refine the best few rigidly at coarse levels; keep the most confident.
-    let classes = ClassMap::from_scene(scene);
     let ctx = FrameContext {
         model,
         cameras: &scene.cameras,

@@ -130,11 +130,31 @@ fn line_target(line: &Line, c: DVec2, ep: &EnergyParams) -> (f64, f64) {
         .map(|(i, w)| w * ((i as i64 - r) as f64 - mean).powi(2))
         .sum::<f64>()
         / total;
+    // Close to the optimum the softmin collapses onto one integer shift and loses the sub-pixel
+    // offset the smooth energy still sees: refine with a parabola through the neighbours of
+    // the best shift, weighted by its curvature (Laplace approximation).
+    let k = profile
+        .iter()
+        .enumerate()
+        .min_by(|a, b| a.1.total_cmp(b.1))
+        .map(|(i, _)| i)
+        .unwrap_or(r as usize);
+    if var < 1.0 && k > 0 && k + 1 < profile.len() {
+        let (em, e0, ep) = (profile[k - 1], profile[k], profile[k + 1]);
+        let curvature = em - 2.0 * e0 + ep;
+        if curvature > 1e-9 {
+            let offset = (0.5 * (em - ep) / curvature).clamp(-0.5, 0.5);
+            return (
+                k as f64 - r as f64 + offset,
+                (1.0 / curvature).clamp(0.02, 4.0),
+            );
+        }
+    }
     (mean, var.max(0.25))
 }
 
 /// One damped Gauss–Newton step on `block`; returns the new state.
-fn step(
+pub fn step(
     ctx: &FrameContext,
     lines: &[Line],
     state: &FitState,
@@ -181,6 +201,7 @@ fn step(
             h[(r, q)] = h[(q, r)];
         }
     }
+    let b_data = b.clone();
     let max_diag = (0..n).map(|k| h[(k, k)]).fold(0.0, f64::max).max(1e-9);
     for k in 0..n {
         h[(k, k)] += params.lm * h[(k, k)] + 1e-6 * max_diag;
@@ -264,27 +285,37 @@ fn step(
         }
         _ => {}
     }
-    let delta = h.cholesky()?.solve(&b);
-    if delta.iter().any(|v| !v.is_finite()) {
-        return None;
-    }
-    // Accept only steps that lower the energy on these lines (plus the block's priors), halving
-    // the step up to twice: the line targets are a linearisation and can overshoot.
+    let cholesky = h.cholesky()?;
+    // Accept only steps that lower the energy on these lines (plus the block's priors).
     let centre = ctx.model_centre(&deformed);
     let objective =
         |st: &FitState| ctx.energy(lines, st, ep) + prior_energy(ctx, st, block, params);
     let before = objective(state);
-    let mut scale = 1.0;
-    for _ in 0..3 {
-        let scaled: Vec<f64> = delta.iter().map(|d| d * scale).collect();
-        let mut next = apply_increment(state, block, &scaled, centre);
-        ctx.model.shape.pca.clamp_weights(&mut next.shape);
-        if objective(&next) < before {
-            return Some(next);
+    let try_step = |delta: &DVector<f64>, tries: usize| -> Option<FitState> {
+        if delta.iter().any(|v| !v.is_finite()) {
+            return None;
         }
-        scale *= 0.5;
+        let mut scale = 1.0;
+        for _ in 0..tries {
+            let scaled: Vec<f64> = delta.iter().map(|d| d * scale).collect();
+            let mut next = apply_increment(state, block, &scaled, centre);
+            ctx.model.shape.pca.clamp_weights(&mut next.shape);
+            if objective(&next) < before {
+                return Some(next);
+            }
+            scale *= 0.5;
+        }
+        None
+    };
+    // First the line targets (they see minima several pixels away, robustly) ...
+    if let Some(next) = try_step(&cholesky.solve(&b), 3) {
+        return Some(next);
     }
-    None
+    // ... and near the optimum, where targets of ambiguous lines outvote the local slope, a
+    // Newton step on the energy itself: H is positive definite, so −H⁻¹∇E descends.
+    let gradient = DVector::from_vec(ctx.gradient(lines, state, block, ep));
+    let prior = &b - &b_data;
+    try_step(&cholesky.solve(&(prior - gradient)), 5)
 }
 
 /// The priors' energy in the same units the step's normal equations use.

@@ -41,6 +41,57 @@ impl ViewProbabilities {
         }
     }
 
+    /// Probabilities made from a label image instead of the forest: `confidence` for the
+    /// pixel's class, the rest shared by the others; coarser levels average 2×2 blocks. This is
+    /// how the fit is tested apart from the appearance model.
+    pub fn from_labels(
+        labels: &crate::plane::LabelImage,
+        class_labels: &[u8],
+        levels: usize,
+        confidence: f32,
+    ) -> Self {
+        let k = class_labels.len();
+        let other = (1.0 - confidence) / (k.max(2) - 1) as f32;
+        let mut probs: Vec<f32> = labels
+            .data
+            .iter()
+            .flat_map(|&l| {
+                let c = class_labels.iter().position(|&x| x == l).unwrap_or(0);
+                (0..k).map(move |j| if j == c { confidence } else { other })
+            })
+            .collect();
+        let (mut w, mut h) = (labels.width, labels.height);
+        let mut out = Vec::new();
+        for l in 0..levels.max(1) {
+            if l > 0 {
+                let (nw, nh) = ((w / 2).max(1), (h / 2).max(1));
+                let mut next = vec![0f32; nw * nh * k];
+                for y in 0..nh {
+                    for x in 0..nw {
+                        for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                            let (sx, sy) = ((2 * x + dx).min(w - 1), (2 * y + dy).min(h - 1));
+                            for j in 0..k {
+                                next[(y * nw + x) * k + j] += 0.25 * probs[(sy * w + sx) * k + j];
+                            }
+                        }
+                    }
+                }
+                probs = next;
+                w = nw;
+                h = nh;
+            }
+            out.push(Level {
+                image: Arc::new(RgbImage::new(w as u32, h as u32)),
+                features: None,
+                probs: probs.clone(),
+            });
+        }
+        Self {
+            levels: out,
+            classes: k,
+        }
+    }
+
     pub fn level_count(&self) -> usize {
         self.levels.len()
     }

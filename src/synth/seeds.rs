@@ -7,6 +7,12 @@ use crate::render::squared_edt;
 use crate::rng::Rng;
 use crate::scene::{SEED_BACKGROUND, SEED_NONE};
 
+/// Gap (px) a brush keeps from a class boundary in ordinary strokes.
+pub const CLEARANCE_PX: f64 = 2.0;
+/// Gap (px) in strokes that trace an edge: a careful user paints right up to it, which teaches
+/// the forest what pixels next to an edge look like (without them it erodes every region).
+pub const EDGE_CLEARANCE_PX: f64 = 0.5;
+
 /// Paints `strokes` scribbles of a round brush of `radius` px inside `region` with `value`.
 pub fn paint_strokes(
     seeds: &mut LabelImage,
@@ -14,12 +20,13 @@ pub fn paint_strokes(
     value: u8,
     strokes: usize,
     radius: f64,
+    clearance_px: f64,
     rng: &mut Rng,
 ) {
     let (w, h) = (region.width, region.height);
     // Distance from each pixel to the nearest pixel outside the region.
     let inside = squared_edt(&region.map(|&r| !r));
-    let margin = radius + 2.0;
+    let margin = radius + clearance_px;
     let ok = |x: f64, y: f64| {
         if x < 0.0 || y < 0.0 || x >= w as f64 || y >= h as f64 {
             return false;
@@ -101,6 +108,7 @@ pub fn seeds_for_view(
         SEED_BACKGROUND,
         4,
         radius,
+        CLEARANCE_PX,
         rng,
     );
     // Users also paint right around the organ, where mistakes would cost most: background
@@ -117,12 +125,28 @@ pub fn seeds_for_view(
             .map(|(&b, &d)| b && (d as f64) <= ring_px * ring_px)
             .collect(),
     };
-    paint_strokes(&mut seeds, &ring, SEED_BACKGROUND, 3, radius, rng);
-    paint_strokes(&mut seeds, tools, SEED_BACKGROUND, 1, radius, rng);
+    paint_strokes(
+        &mut seeds,
+        &ring,
+        SEED_BACKGROUND,
+        3,
+        radius,
+        EDGE_CLEARANCE_PX,
+        rng,
+    );
+    paint_strokes(
+        &mut seeds,
+        tools,
+        SEED_BACKGROUND,
+        1,
+        radius,
+        CLEARANCE_PX,
+        rng,
+    );
     for &l in structure_labels {
         let strokes = if l == structure_labels[0] { 3 } else { 2 };
         let region = labels.mask_of(l);
-        paint_strokes(&mut seeds, &region, l, strokes, radius, rng);
+        paint_strokes(&mut seeds, &region, l, strokes, radius, CLEARANCE_PX, rng);
         // And one stroke along the inside of its edge, as a careful user traces it.
         let to_outside = squared_edt(&region.map(|&r| !r));
         let rim = Plane {
@@ -135,7 +159,7 @@ pub fn seeds_for_view(
                 .map(|(&r, &d)| r && (d as f64) <= ring_px * ring_px)
                 .collect(),
         };
-        paint_strokes(&mut seeds, &rim, l, 1, radius, rng);
+        paint_strokes(&mut seeds, &rim, l, 1, radius, EDGE_CLEARANCE_PX, rng);
     }
     seeds
 }

@@ -1,0 +1,160 @@
+//! `endofuse track` end to end on phantoms: outputs exactly as CONTRACT §3, segmentation and
+//! hidden-structure accuracy against ground truth, automatic initialisation, and bad input.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("endofuse-track-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    d
+}
+
+fn synth(name: &str, extra: &[&str]) -> PathBuf {
+    let dir = tmp(name);
+    let out = Command::new(env!("CARGO_BIN_EXE_endofuse"))
+        .args([
+            "synth",
+            "--frames",
+            "6",
+            "--seed",
+            "4",
+            "--width",
+            "320",
+            "--height",
+            "180",
+            "--noise",
+            "0.02",
+            "--no-zoom",
+        ])
+        .args(extra)
+        .arg("--out")
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    dir
+}
+
+fn track(scene: &Path, out: &Path, args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_endofuse"))
+        .arg("track")
+        .arg(scene)
+        .arg("--out")
+        .arg(out)
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn json(p: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
+}
+
+#[test]
+fn track_writes_the_contract_outputs_and_segments_the_phantom() {
+    let scene = synth("ls", &[]);
+    let out = tmp("ls-out");
+    let run = track(&scene, &out, &["--mode", "LS", "--frames", "0..5"]);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    for cam in ["left", "right"] {
+        let mask = image::open(out.join(format!("masks/{cam}/000005.png"))).unwrap();
+        assert_eq!((mask.width(), mask.height()), (320, 180));
+        assert!(
+            out.join(format!("hidden/tumour_endo/{cam}/000003.png"))
+                .exists()
+        );
+    }
+    let traj = json(&out.join("trajectory.json"));
+    let frames = traj["frames"].as_array().unwrap();
+    assert_eq!(frames.len(), 6);
+    for key in [
+        "frame",
+        "affine",
+        "shape",
+        "cameras",
+        "centroids",
+        "energy",
+        "iterations",
+        "ms",
+        "confidence",
+        "lost",
+    ] {
+        assert!(!frames[2][key].is_null(), "trajectory frames carry '{key}'");
+    }
+    assert_eq!(frames[0]["affine"].as_array().unwrap().len(), 12);
+    assert!(
+        frames[0]["centroids"]["tumour_endo"]
+            .as_array()
+            .unwrap()
+            .len()
+            == 3
+    );
+    let m = json(&out.join("metrics.json"));
+    assert_eq!(m["mode"], "LS");
+    assert_eq!(m["frames"], 6);
+    let dice = m["dice"]["mean"].as_f64().unwrap();
+    assert!(dice > 0.88, "LS Dice {dice}: {m}");
+    assert!(m["dice"]["by_structure"]["kidney"].as_f64().unwrap() > 0.9);
+    assert_eq!(m["dice"]["per_frame"].as_array().unwrap().len(), 6);
+    let hidden = &m["hidden"]["tumour_endo"];
+    assert!(hidden["dice_mean"].as_f64().unwrap() > 0.6, "{m}");
+    assert!(
+        hidden["centroid_error_mm_mean"].as_f64().unwrap() < 12.0,
+        "{m}"
+    );
+    assert!(
+        m["camera"]["fx_rel_error_mean"].as_f64().unwrap() < 1e-9,
+        "no zoom, no camera change"
+    );
+    assert!(m["timing"]["ms_per_frame"]["median"].as_f64().unwrap() > 0.0);
+    assert_eq!(m["lost_frames"], 0);
+    let _ = std::fs::remove_dir_all(&scene);
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+#[test]
+fn without_an_initial_pose_the_model_is_placed_automatically() {
+    let scene = synth("auto", &[]);
+    let p = scene.join("scene.json");
+    let mut v = json(&p);
+    v.as_object_mut().unwrap().remove("initial_pose");
+    std::fs::write(&p, serde_json::to_string(&v).unwrap()).unwrap();
+    let out = tmp("auto-out");
+    let run = track(&scene, &out, &["--frames", "0..2"]);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let m = json(&out.join("metrics.json"));
+    assert!(
+        m["dice"]["by_structure"]["kidney"].as_f64().unwrap() > 0.85,
+        "{m}"
+    );
+    assert!(
+        m["dice"]["by_structure"]["tumour_exo"].as_f64().unwrap() > 0.5,
+        "the tumour ends on the right side: {m}"
+    );
+    let _ = std::fs::remove_dir_all(&scene);
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+#[test]
+fn bad_track_arguments_are_refused() {
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/handmade_scene");
+    let out = tmp("bad");
+    let run = track(&scene, &out, &["--mode", "XYZ"]);
+    assert_eq!(run.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&run.stderr).contains("--mode"));
+    let run = track(&scene, &out, &["--frames", "0..9"]);
+    assert_eq!(run.status.code(), Some(2));
+}
