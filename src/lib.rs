@@ -16,6 +16,7 @@ pub mod scene;
 pub mod shape;
 pub mod synth;
 pub mod track;
+pub mod worker;
 
 pub use error::{Error, InputError, Result};
 pub use scene::Scene;

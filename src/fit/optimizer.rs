@@ -11,6 +11,8 @@ use crate::appearance::Appearance;
 use crate::geometry::Affine;
 use glam::{DVec2, DVec3};
 use nalgebra::{DMatrix, DVector};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// The paper's settings: rigid, affine, affine + shape, affine + shape + cameras.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -61,6 +63,9 @@ pub struct FitParams {
     pub strain_prior: f64,
     /// Tikhonov weight (relative to the data) towards the previous frame's pose.
     pub pose_damping: f64,
+    /// Raised by whoever wants the fit to stop: checked between Gauss–Newton steps, so a
+    /// cancel is answered within one step (a few ms), not one frame.
+    pub cancel: Option<Arc<AtomicBool>>,
 }
 
 impl Default for FitParams {
@@ -75,6 +80,7 @@ impl Default for FitParams {
             camera_damping: 1.0,
             strain_prior: 1.0,
             pose_damping: 1.0,
+            cancel: None,
         }
     }
 }
@@ -381,6 +387,13 @@ pub fn fit_frame(
                     block
                 };
                 for _ in 0..params.steps {
+                    if params
+                        .cancel
+                        .as_ref()
+                        .is_some_and(|c| c.load(Ordering::Relaxed))
+                    {
+                        break;
+                    }
                     let lines = ctx.build_lines(&state, views, appearance, &ep);
                     iterations += 1;
                     match step(ctx, &lines, &state, prev, block, &ep, params) {

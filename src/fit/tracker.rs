@@ -14,6 +14,7 @@ use crate::plane::{LabelImage, Mask};
 use crate::render::raster::{RasterOptions, RenderObject, rasterize};
 use crate::scene::Scene;
 use glam::DVec3;
+use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Below this confidence a frame counts as lost.
@@ -53,6 +54,13 @@ impl TrackOptions {
                 ..FitParams::default()
             },
         }
+    }
+
+    /// Lets `cancel` stop the fit between steps as well as between frames.
+    pub fn with_cancel(mut self, cancel: Option<Arc<AtomicBool>>) -> Self {
+        self.first.cancel = cancel.clone();
+        self.next.cancel = cancel;
+        self
     }
 }
 
@@ -239,6 +247,10 @@ pub fn track(
             params,
             correct_cameras,
         );
+        if cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
+            // A fit cut short is not a result.
+            return Err(Error::Cancelled);
+        }
         let lost = fit.confidence < LOST_CONFIDENCE || fit.lines < 12;
         // A lost frame keeps the last good state: nothing learnt from it.
         let state = if lost {

@@ -1,0 +1,400 @@
+//! The background worker the app drives: commands in, events out, over channels (the house
+//! style of rerun). The worker thread owns the heavy state (scene, forest, last fit); the UI
+//! only drains events each frame and never blocks. Cancel is a shared flag checked between
+//! frames and between Gauss–Newton steps; a panic inside a job becomes an error event and the
+//! worker keeps serving.
+
+use crate::appearance::{Appearance, ForestParams, TrainStats};
+use crate::error::Error;
+use crate::fit::Model;
+use crate::fit::optimizer::Mode;
+use crate::fit::tracker::{TrackOptions, TrackedFrame, initial_state, track};
+use crate::geometry::Affine;
+use crate::scene::{FrameCheck, Scene};
+use crossbeam_channel::{Receiver, Sender, unbounded};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::thread::JoinHandle;
+
+/// What the UI asks for.
+pub enum Command {
+    /// A scene folder, its scene.json, or "demo".
+    LoadScene(String),
+    /// Use a scene the UI already holds (e.g. with freshly painted seeds).
+    UseScene(Arc<Scene>),
+    Train(ForestParams),
+    /// Automatic initial pose on a frame.
+    Initialise {
+        frame: usize,
+    },
+    /// Track an inclusive frame range from `start` (or the scene's/automatic initial pose).
+    Track {
+        mode: Mode,
+        frames: (usize, usize),
+        start: Option<Affine>,
+    },
+    /// Runs an arbitrary job on the worker thread (tests, future extensions).
+    Run(Box<dyn FnOnce() -> Result<(), Error> + Send>),
+    Shutdown,
+}
+
+/// Which long job an event is about.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Task {
+    Load,
+    Train,
+    Initialise,
+    Track,
+    Job,
+}
+
+/// What the worker tells the UI.
+pub enum Event {
+    SceneLoaded(Arc<Scene>),
+    Trained(TrainStats),
+    Initialised(Affine),
+    Progress {
+        task: Task,
+        done: usize,
+        total: usize,
+    },
+    Frame(Box<TrackedFrame>),
+    Finished(Task),
+    Cancelled(Task),
+    /// One line for the user; the worker keeps running.
+    Failed {
+        task: Task,
+        message: String,
+    },
+}
+
+/// Handle to the worker thread.
+pub struct Worker {
+    commands: Sender<(u64, Command)>,
+    events: Receiver<Event>,
+    cancel: Arc<AtomicBool>,
+    /// Commands sent so far, and the last one a cancel applies to: a cancel stops every
+    /// command sent before it (running or queued) and none sent after.
+    sent: AtomicU64,
+    cancelled_upto: Arc<AtomicU64>,
+    thread: Option<JoinHandle<()>>,
+}
+
+struct State {
+    scene: Option<Arc<Scene>>,
+    appearance: Option<Appearance>,
+}
+
+impl Worker {
+    pub fn spawn() -> Self {
+        let (commands, inbox) = unbounded::<(u64, Command)>();
+        let cancelled_upto = Arc::new(AtomicU64::new(0));
+        let upto = cancelled_upto.clone();
+        let (outbox, events) = unbounded::<Event>();
+        let cancel = Arc::new(AtomicBool::new(false));
+        let flag = cancel.clone();
+        let thread = std::thread::Builder::new()
+            .name("endofuse-worker".into())
+            .spawn(move || {
+                let mut state = State {
+                    scene: None,
+                    appearance: None,
+                };
+                for (id, command) in inbox {
+                    if matches!(command, Command::Shutdown) {
+                        break;
+                    }
+                    flag.store(id <= upto.load(Ordering::SeqCst), Ordering::SeqCst);
+                    let task = task_of(&command);
+                    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                        run(command, &mut state, &flag, &outbox)
+                    }));
+                    let event = match result {
+                        Ok(Ok(())) => Event::Finished(task),
+                        Ok(Err(Error::Cancelled)) => Event::Cancelled(task),
+                        Ok(Err(e)) => Event::Failed {
+                            task,
+                            message: e.to_string(),
+                        },
+                        Err(panic) => {
+                            let what = panic
+                                .downcast_ref::<&str>()
+                                .map(|s| s.to_string())
+                                .or_else(|| panic.downcast_ref::<String>().cloned())
+                                .unwrap_or_else(|| "unknown".into());
+                            Event::Failed {
+                                task,
+                                message: format!("internal error: {what}"),
+                            }
+                        }
+                    };
+                    if outbox.send(event).is_err() {
+                        break;
+                    }
+                }
+            })
+            .ok();
+        Self {
+            commands,
+            events,
+            cancel,
+            sent: AtomicU64::new(0),
+            cancelled_upto,
+            thread,
+        }
+    }
+
+    /// Queues a command; false if the worker is gone.
+    pub fn send(&self, command: Command) -> bool {
+        let id = self.sent.fetch_add(1, Ordering::SeqCst) + 1;
+        self.commands.send((id, command)).is_ok()
+    }
+
+    /// Stops the running job and any queued before now (answered within one Gauss–Newton
+    /// step or frame).
+    pub fn cancel(&self) {
+        self.cancelled_upto
+            .store(self.sent.load(Ordering::SeqCst), Ordering::SeqCst);
+        self.cancel.store(true, Ordering::SeqCst);
+    }
+
+    /// Every event waiting now, without blocking.
+    pub fn drain(&self) -> Vec<Event> {
+        self.events.try_iter().collect()
+    }
+
+    /// Waits for the next event (tests and the CLI; the UI uses [`Worker::drain`]).
+    pub fn wait(&self, timeout: std::time::Duration) -> Option<Event> {
+        self.events.recv_timeout(timeout).ok()
+    }
+}
+
+impl Drop for Worker {
+    fn drop(&mut self) {
+        self.cancel();
+        let _ = self.commands.send((u64::MAX, Command::Shutdown));
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+fn task_of(c: &Command) -> Task {
+    match c {
+        Command::LoadScene(_) | Command::UseScene(_) => Task::Load,
+        Command::Train(_) => Task::Train,
+        Command::Initialise { .. } => Task::Initialise,
+        Command::Track { .. } => Task::Track,
+        Command::Run(_) | Command::Shutdown => Task::Job,
+    }
+}
+
+fn need_scene(state: &State) -> Result<Arc<Scene>, Error> {
+    state
+        .scene
+        .clone()
+        .ok_or_else(|| crate::error::input_err("scene", "no scene is loaded"))
+}
+
+fn need_appearance(state: &State) -> Result<&Appearance, Error> {
+    state
+        .appearance
+        .as_ref()
+        .ok_or_else(|| crate::error::input_err("seeds", "train the forest first"))
+}
+
+fn run(
+    command: Command,
+    state: &mut State,
+    cancel: &Arc<AtomicBool>,
+    out: &Sender<Event>,
+) -> Result<(), Error> {
+    match command {
+        Command::LoadScene(spec) => {
+            let scene = Arc::new(Scene::open(&spec, FrameCheck::Headers)?);
+            state.scene = Some(scene.clone());
+            state.appearance = None;
+            let _ = out.send(Event::SceneLoaded(scene));
+        }
+        Command::UseScene(scene) => {
+            state.scene = Some(scene);
+            state.appearance = None;
+        }
+        Command::Train(params) => {
+            let scene = need_scene(state)?;
+            let model = Appearance::train(&scene, &params, Some(cancel))?;
+            let _ = out.send(Event::Trained(model.stats.clone()));
+            state.appearance = Some(model);
+        }
+        Command::Initialise { frame } => {
+            let scene = need_scene(state)?;
+            let appearance = need_appearance(state)?;
+            let affine = crate::fit::init::automatic_pose(
+                &scene,
+                &Model::from_scene(&scene),
+                appearance,
+                frame,
+            )?;
+            let _ = out.send(Event::Initialised(affine));
+        }
+        Command::Track {
+            mode,
+            frames,
+            start,
+        } => {
+            let scene = need_scene(state)?;
+            let appearance = need_appearance(state)?;
+            if frames.0 > frames.1 || frames.1 >= scene.frame_count {
+                return Err(crate::error::input_err(
+                    "frames",
+                    format!(
+                        "{}..{} is not inside 0..{}",
+                        frames.0,
+                        frames.1,
+                        scene.frame_count - 1
+                    ),
+                ));
+            }
+            let model = Model::from_scene(&scene);
+            let affine = match start.or(scene.initial_pose) {
+                Some(a) => a,
+                None => crate::fit::init::automatic_pose(&scene, &model, appearance, frames.0)?,
+            };
+            let options = TrackOptions::new(mode, frames).with_cancel(Some(cancel.clone()));
+            let total = frames.1 + 1 - frames.0;
+            let mut done = 0;
+            track(
+                &scene,
+                appearance,
+                initial_state(&scene, &model, affine),
+                &options,
+                Some(cancel),
+                &mut |f| {
+                    done += 1;
+                    let _ = out.send(Event::Progress {
+                        task: Task::Track,
+                        done,
+                        total,
+                    });
+                    let _ = out.send(Event::Frame(Box::new(f)));
+                    Ok(())
+                },
+            )?;
+        }
+        Command::Run(job) => job()?,
+        Command::Shutdown => {}
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::time::{Duration, Instant};
+
+    fn until(worker: &Worker, mut want: impl FnMut(&Event) -> bool) -> Vec<Event> {
+        let mut seen = Vec::new();
+        let deadline = Instant::now() + Duration::from_secs(120);
+        while Instant::now() < deadline {
+            if let Some(e) = worker.wait(Duration::from_millis(200)) {
+                let stop = want(&e);
+                seen.push(e);
+                if stop {
+                    return seen;
+                }
+            }
+        }
+        panic!("the worker did not answer in time");
+    }
+
+    #[test]
+    fn loads_trains_tracks_streams_frames_and_survives_errors_and_panics() {
+        let worker = Worker::spawn();
+        // Errors are events, not a dead worker.
+        worker.send(Command::Train(ForestParams::default()));
+        let ev = until(&worker, |e| matches!(e, Event::Failed { .. }));
+        assert!(
+            matches!(ev.last(), Some(Event::Failed { task: Task::Train, message }) if message.contains("no scene"))
+        );
+        worker.send(Command::Run(Box::new(|| panic!("boom"))));
+        let ev = until(&worker, |e| matches!(e, Event::Failed { .. }));
+        assert!(
+            matches!(ev.last(), Some(Event::Failed { message, .. }) if message.contains("boom"))
+        );
+        worker.send(Command::LoadScene("/no/such/scene".into()));
+        until(&worker, |e| {
+            matches!(
+                e,
+                Event::Failed {
+                    task: Task::Load,
+                    ..
+                }
+            )
+        });
+
+        let scene = crate::synth::memory_scene(&crate::synth::SynthOptions {
+            frames: 4,
+            width: 240,
+            height: 136,
+            ..crate::synth::SynthOptions::default()
+        })
+        .unwrap();
+        worker.send(Command::UseScene(Arc::new(scene)));
+        worker.send(Command::Train(ForestParams {
+            trees: 5,
+            ..ForestParams::default()
+        }));
+        let ev = until(&worker, |e| matches!(e, Event::Finished(Task::Train)));
+        assert!(
+            ev.iter()
+                .any(|e| matches!(e, Event::Trained(s) if s.samples > 100))
+        );
+        worker.send(Command::Track {
+            mode: Mode::LS,
+            frames: (0, 3),
+            start: None,
+        });
+        let ev = until(&worker, |e| {
+            matches!(e, Event::Finished(Task::Track) | Event::Failed { .. })
+        });
+        let frames: Vec<usize> = ev
+            .iter()
+            .filter_map(|e| {
+                if let Event::Frame(f) = e {
+                    Some(f.frame)
+                } else {
+                    None
+                }
+            })
+            .collect();
+        assert_eq!(frames, vec![0, 1, 2, 3], "frames stream in order");
+
+        // Cancel: a long job stops and says so.
+        worker.send(Command::Track {
+            mode: Mode::LS,
+            frames: (0, 3),
+            start: None,
+        });
+        worker.cancel();
+        let ev = until(&worker, |e| {
+            matches!(e, Event::Cancelled(_) | Event::Finished(Task::Track))
+        });
+        assert!(
+            matches!(ev.last(), Some(Event::Cancelled(Task::Track))),
+            "cancelled, not finished"
+        );
+        // A command sent after the cancel runs normally.
+        worker.send(Command::Track {
+            mode: Mode::LS,
+            frames: (0, 0),
+            start: None,
+        });
+        let ev = until(&worker, |e| {
+            matches!(
+                e,
+                Event::Finished(Task::Track) | Event::Cancelled(_) | Event::Failed { .. }
+            )
+        });
+        assert!(matches!(ev.last(), Some(Event::Finished(Task::Track))));
+    }
+}
