@@ -71,6 +71,9 @@ pub struct FrameFeatures {
     /// Box-smoothed Y (radius 1), for the gradient.
     smooth_y: Vec<f32>,
     radii: [usize; 4],
+    /// Where this (possibly cropped) image sits in the full frame, and the full frame's size.
+    offset: (usize, usize),
+    full: (usize, usize),
 }
 
 fn radius_for(width: usize, r960: f64) -> usize {
@@ -79,6 +82,44 @@ fn radius_for(width: usize, r960: f64) -> usize {
 
 impl FrameFeatures {
     pub fn new(frame: &RgbImage) -> Self {
+        let full = (frame.width() as usize, frame.height() as usize);
+        Self::build(frame, full, (0, 0))
+    }
+
+    /// Features of the pixels inside `(x0, y0, w, h)` of `frame` only: integral images cost
+    /// the region, not the frame. Window radii still follow the full frame's width, and
+    /// [`FrameFeatures::valid`] says where results equal whole-frame ones.
+    pub fn region(frame: &RgbImage, x0: usize, y0: usize, w: usize, h: usize) -> Self {
+        let full = (frame.width() as usize, frame.height() as usize);
+        let (x0, y0) = (
+            x0.min(full.0.saturating_sub(1)),
+            y0.min(full.1.saturating_sub(1)),
+        );
+        let (w, h) = (w.clamp(1, full.0 - x0), h.clamp(1, full.1 - y0));
+        let crop =
+            image::imageops::crop_imm(frame, x0 as u32, y0 as u32, w as u32, h as u32).to_image();
+        Self::build(&crop, full, (x0, y0))
+    }
+
+    /// Largest window radius (px) any feature reaches, plus the gradient's.
+    pub fn reach(&self) -> usize {
+        self.radii.iter().copied().max().unwrap_or(1) + 2
+    }
+
+    /// Does the full-frame pixel (x, y) get exactly its whole-frame features here? True when
+    /// every window around it lies inside the region or is clipped by the frame itself.
+    pub fn valid(&self, x: usize, y: usize) -> bool {
+        let m = self.reach();
+        let (ox, oy) = self.offset;
+        let axis = |p: usize, o: usize, len: usize, full: usize| {
+            (p >= o && p < o + len)
+                && (p >= o + m || o == 0)
+                && (p + m < o + len || o + len == full)
+        };
+        axis(x, ox, self.width, self.full.0) && axis(y, oy, self.height, self.full.1)
+    }
+
+    fn build(frame: &RgbImage, full: (usize, usize), offset: (usize, usize)) -> Self {
         let (w, h) = (frame.width() as usize, frame.height() as usize);
         let base: Vec<[u8; 6]> = frame
             .as_raw()
@@ -136,13 +177,16 @@ impl FrameFeatures {
                 sum as f32 / area as f32
             })
             .collect();
+        let reference = full.0;
         let radii = [
-            radius_for(w, HIST_RADIUS_960),
-            radius_for(w, SMALL_RADIUS_960),
-            radius_for(w, LARGE_RADIUS_960),
-            radius_for(w, CONTEXT_RADIUS_960),
+            radius_for(reference, HIST_RADIUS_960),
+            radius_for(reference, SMALL_RADIUS_960),
+            radius_for(reference, LARGE_RADIUS_960),
+            radius_for(reference, CONTEXT_RADIUS_960),
         ];
         Self {
+            offset,
+            full,
             width: w,
             height: h,
             base,
@@ -204,10 +248,16 @@ impl FrameFeatures {
             .collect()
     }
 
-    /// Features of the listed pixels (x, y).
+    /// Features of the listed full-frame pixels (x, y); each must lie in the region.
     pub fn pixels(&self, list: &[(u32, u32)]) -> Vec<FeatureVector> {
+        let (ox, oy) = self.offset;
         list.par_iter()
-            .map(|&(x, y)| self.at(x as usize, y as usize))
+            .map(|&(x, y)| {
+                self.at(
+                    (x as usize).saturating_sub(ox).min(self.width - 1),
+                    (y as usize).saturating_sub(oy).min(self.height - 1),
+                )
+            })
             .collect()
     }
 }
@@ -341,6 +391,39 @@ mod tests {
         let f = ff.at(40, 20);
         let total: u32 = f[6..10].iter().map(|&v| v as u32).sum();
         assert!((253..=257).contains(&total), "{total}");
+    }
+
+    #[test]
+    fn region_features_equal_whole_frame_features_where_valid() {
+        let mut rng = Rng::new(72);
+        let frame = RgbImage::from_fn(200, 120, |_, _| {
+            image::Rgb([
+                rng.below(256) as u8,
+                rng.below(256) as u8,
+                rng.below(256) as u8,
+            ])
+        });
+        let whole = FrameFeatures::new(&frame);
+        for (x0, y0, w, h) in [(30, 20, 100, 70), (0, 0, 90, 50), (120, 60, 80, 60)] {
+            let region = FrameFeatures::region(&frame, x0, y0, w, h);
+            let mut checked = 0;
+            for y in 0..120 {
+                for x in 0..200 {
+                    if region.valid(x, y) {
+                        assert_eq!(
+                            region.pixels(&[(x as u32, y as u32)])[0],
+                            whole.at(x, y),
+                            "pixel ({x},{y}) of region ({x0},{y0},{w},{h})"
+                        );
+                        checked += 1;
+                    }
+                }
+            }
+            assert!(
+                checked > 100,
+                "region ({x0},{y0},{w},{h}): {checked} valid pixels"
+            );
+        }
     }
 
     #[test]

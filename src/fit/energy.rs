@@ -165,7 +165,12 @@ impl FrameContext<'_> {
                     faces: &self.model.structures[i].faces,
                 })
                 .collect();
-            let raster = rasterize(&lcam, &objects, &RasterOptions::default());
+            // Visibility is judged one level coarser: a quarter of the pixels, and rim points
+            // only need "this structure just inside, something else just outside".
+            let vis_size = ((size.0 / 2).max(1), (size.1 / 2).max(1));
+            let vis_cam = level_camera(cam, &state.intrinsics[m], params.level + 1, vis_size);
+            let raster = rasterize(&vis_cam, &objects, &RasterOptions::default());
+            let (vw, vh) = (vis_size.0 as i64, vis_size.1 as i64);
             let centre = cam.extrinsics.center_mm();
             let (w, h) = (size.0 as i64, size.1 as i64);
             let mut taken = std::collections::HashSet::new();
@@ -211,7 +216,13 @@ impl FrameContext<'_> {
                         let (x, y) = (q.x.round() as i64, q.y.round() as i64);
                         (x >= 0 && y >= 0 && x < w && y < h).then(|| (y * w + x) as usize)
                     };
-                    let (Some(inside), Some(outside)) = (pick(c - n * 1.5), pick(c + n * 1.5))
+                    let pick_vis = |q: DVec2| -> Option<usize> {
+                        let q = (q + DVec2::splat(0.5)) * 0.5 - DVec2::splat(0.5);
+                        let (x, y) = (q.x.round() as i64, q.y.round() as i64);
+                        (x >= 0 && y >= 0 && x < vw && y < vh).then(|| (y * vw + x) as usize)
+                    };
+                    let (Some(inside), Some(outside)) =
+                        (pick_vis(c - n * 3.0), pick_vis(c + n * 3.0))
                     else {
                         continue;
                     };

@@ -10,6 +10,8 @@ use std::sync::Arc;
 struct Level {
     image: Arc<RgbImage>,
     features: Option<FrameFeatures>,
+    /// (x, y, w, h) the features cover.
+    region: Option<(usize, usize, usize, usize)>,
     /// `classes` probabilities per pixel; NaN where not yet computed.
     probs: Vec<f32>,
 }
@@ -32,6 +34,7 @@ impl ViewProbabilities {
             out.push(Level {
                 image: img.clone(),
                 features: None,
+                region: None,
                 probs: vec![f32::NAN; n * classes],
             });
         }
@@ -83,6 +86,7 @@ impl ViewProbabilities {
             out.push(Level {
                 image: Arc::new(RgbImage::new(w as u32, h as u32)),
                 features: None,
+                region: None,
                 probs: probs.clone(),
             });
         }
@@ -116,9 +120,45 @@ impl ViewProbabilities {
         }
         missing.sort_unstable();
         missing.dedup();
-        let features = lv
-            .features
-            .get_or_insert_with(|| FrameFeatures::new(&lv.image));
+        // Features over a region around the requested pixels only; grown (rarely: the model
+        // moves little within a frame) when a request falls outside it.
+        let covered = lv.features.as_ref().is_some_and(|f| {
+            missing
+                .iter()
+                .all(|&i| f.valid((i % w) as usize, (i / w) as usize))
+        });
+        if !covered {
+            let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
+            for &i in &missing {
+                let (x, y) = ((i % w) as usize, (i / w) as usize);
+                x0 = x0.min(x);
+                y0 = y0.min(y);
+                x1 = x1.max(x);
+                y1 = y1.max(y);
+            }
+            if let Some((ox, oy, ow, oh)) = lv.region {
+                x0 = x0.min(ox);
+                y0 = y0.min(oy);
+                x1 = x1.max(ox + ow - 1);
+                y1 = y1.max(oy + oh - 1);
+            }
+            // Margin: the widest window, plus slack so small motions need no rebuild.
+            let margin = FrameFeatures::region(&lv.image, 0, 0, 1, 1).reach() + 16;
+            let (iw, ih) = (lv.image.width() as usize, lv.image.height() as usize);
+            let (rx0, ry0) = (x0.saturating_sub(margin), y0.saturating_sub(margin));
+            let (rx1, ry1) = ((x1 + margin).min(iw - 1), (y1 + margin).min(ih - 1));
+            lv.region = Some((rx0, ry0, rx1 + 1 - rx0, ry1 + 1 - ry0));
+            lv.features = Some(FrameFeatures::region(
+                &lv.image,
+                rx0,
+                ry0,
+                rx1 + 1 - rx0,
+                ry1 + 1 - ry0,
+            ));
+        }
+        let Some(features) = lv.features.as_ref() else {
+            return;
+        };
         let coords: Vec<(u32, u32)> = missing.iter().map(|&i| (i % w, i / w)).collect();
         let p = appearance.classify_pixels(features, &coords);
         for (j, &i) in missing.iter().enumerate() {
