@@ -55,7 +55,9 @@ pub struct FitParams {
     pub steps: usize,
     /// Levenberg–Marquardt share of the diagonal added to the normal equations.
     pub lm: f64,
-    /// Prior weight on the shape weights (per σ²).
+    /// Prior weight on the shape weights (per σ²). Weak: with the pose damped, the shape
+    /// is what absorbs the organ's real deformation, and the hidden structures follow it
+    /// (hidden-tumour centroid error 1.6–1.8 mm at 2, 6.9 mm at 300, on the phantoms).
     pub shape_prior: f64,
     /// Relative Tikhonov damping of the camera block (camera parameters move slowly).
     pub camera_damping: f64,
@@ -76,7 +78,7 @@ impl Default for FitParams {
             rounds: 2,
             steps: 3,
             lm: 0.05,
-            shape_prior: 300.0,
+            shape_prior: 2.0,
             camera_damping: 1.0,
             strain_prior: 1.0,
             pose_damping: 1.0,

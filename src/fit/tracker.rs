@@ -17,6 +17,9 @@ use glam::DVec3;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
+/// Camera correction stays on this many frames after a marked zoom change ends: the
+/// estimate lags the optics by a frame or two.
+pub const ZOOM_SETTLE_FRAMES: usize = 2;
 /// Below this confidence a frame counts as lost.
 pub const LOST_CONFIDENCE: f64 = 0.25;
 /// Pyramid levels built per frame.
@@ -237,7 +240,8 @@ pub fn track(
             class_of: class_of.clone(),
         };
         let params = if first { &options.first } else { &options.next };
-        let correct_cameras = options.mode == Mode::LSC && scene.in_zoom_change(t);
+        let correct_cameras = options.mode == Mode::LSC
+            && (0..=ZOOM_SETTLE_FRAMES).any(|k| t >= k && scene.in_zoom_change(t - k));
         let fit = fit_frame(
             &ctx,
             &good,
