@@ -14,6 +14,9 @@ use nalgebra::{DMatrix, DVector};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
+/// Shape damping while the cameras are corrected: a zoom must not be explained as growth.
+const ZOOM_SHAPE_DAMPING: f64 = 2.0;
+
 /// The paper's settings: rigid, affine, affine + shape, affine + shape + cameras.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum Mode {
@@ -65,6 +68,8 @@ pub struct FitParams {
     pub strain_prior: f64,
     /// Tikhonov weight (relative to the data) towards the previous frame's pose.
     pub pose_damping: f64,
+    /// Tikhonov weight (relative to the data) of the shape towards the previous frame's.
+    pub shape_damping: f64,
     /// Raised by whoever wants the fit to stop: checked between Gauss–Newton steps, so a
     /// cancel is answered within one step (a few ms), not one frame.
     pub cancel: Option<Arc<AtomicBool>>,
@@ -82,6 +87,7 @@ impl Default for FitParams {
             camera_damping: 1.0,
             strain_prior: 1.0,
             pose_damping: 1.0,
+            shape_damping: 0.0,
             cancel: None,
         }
     }
@@ -275,18 +281,24 @@ pub fn step(
         }
         Block::Shape => {
             let sigma = &ctx.model.shape.pca.sigma_mm;
+            let mean_diag = (0..n).map(|k| h[(k, k)]).sum::<f64>() / n as f64;
             for k in 0..n {
                 let inv = params.shape_prior / (sigma[k] * sigma[k]).max(1e-12);
-                h[(k, k)] += inv;
-                b[k] -= inv * state.shape[k];
+                // Temporal Tikhonov: tissue deforms slowly (and must not mimic a zoom).
+                let lam = params.shape_damping * mean_diag;
+                h[(k, k)] += inv + lam;
+                b[k] -= inv * state.shape[k]
+                    + lam * (state.shape[k] - prev.shape.get(k).copied().unwrap_or(0.0));
             }
         }
         Block::Camera(m) => {
-            // Tikhonov towards the previous frame's intrinsics.
+            // Tikhonov towards the previous frame's intrinsics. k1 is held far harder: zoom
+            // barely moves distortion (paper §IV-A), and a free k1 mimics a focal change.
             let cur = state.intrinsics[m].corrected();
             let old = prev.intrinsics[m].corrected();
+            const RELATIVE: [f64; 5] = [1.0, 1.0, 1.0, 1.0, 100.0];
             for k in 0..5 {
-                let lam = params.camera_damping * h[(k, k)];
+                let lam = params.camera_damping * RELATIVE[k] * h[(k, k)];
                 h[(k, k)] += lam;
                 b[k] -= lam * (cur[k] - old[k]);
             }
@@ -368,6 +380,9 @@ pub fn fit_frame(
         let cams: Vec<Block> = (0..ctx.cameras.len()).map(Block::Camera).collect();
         blocks.splice(0..0, cams);
         params.pose_damping *= 10.0;
+        params.shape_damping = params.shape_damping.max(ZOOM_SHAPE_DAMPING);
+        // The optics can change by a few per cent a frame: give the cameras time to follow.
+        params.rounds = params.rounds.max(2);
         params.camera_damping *= 0.1;
     }
     let params = &params;
