@@ -21,7 +21,7 @@ use glam::{DMat3, DVec2, DVec3};
 use std::sync::Arc;
 
 const LEVEL: usize = 2;
-const REFINED: usize = 4;
+const REFINED: usize = 6;
 
 /// Unit directions spread over the sphere (Fibonacci lattice).
 fn directions(n: usize) -> Vec<DVec3> {
@@ -184,11 +184,14 @@ pub fn automatic_pose(
             })
             .collect(),
     };
+    // A hypothesis is only a guess: hold it lightly so the refinement can turn it by the
+    // ~20° between neighbouring hypotheses.
     let params = FitParams {
         mode: Mode::R,
-        levels: vec![2, 1],
+        levels: vec![2, 1, 0],
         rounds: 4,
         steps: 3,
+        pose_damping: 0.05,
         ..FitParams::default()
     };
     let mut best: Option<(f64, Affine)> = None;
