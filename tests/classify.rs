@@ -1,38 +1,22 @@
 //! `endofuse classify` end to end: outputs exactly as CONTRACT §3, the forest learns from seeds
 //! of the first frames what later frames hold, and bad seeds are refused with exit 2.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-fn run(args: &[&str], extra: &[&Path]) -> std::process::Output {
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_endofuse"));
-    cmd.args(args);
-    for p in extra {
-        cmd.arg(p);
-    }
-    cmd.output().unwrap()
-}
-
 fn tmp(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("endofuse-classify-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    d
+    common::scratch_dir(&format!("classify-{name}"))
 }
 
 #[test]
 fn classify_writes_the_contract_outputs_and_segments_later_frames() {
-    let scene = tmp("scene");
-    let out = run(
+    let scene = common::synth(
+        "classify-scene",
         &[
-            "synth", "--frames", "8", "--seed", "2", "--width", "320", "--height", "180",
-            "--noise", "0.03", "--out",
+            "--frames", "8", "--seed", "2", "--width", "320", "--height", "180", "--noise", "0.03",
         ],
-        &[&scene],
-    );
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
     );
     let dir = tmp("out");
     let out = Command::new(env!("CARGO_BIN_EXE_endofuse"))
@@ -80,22 +64,7 @@ fn classify_writes_the_contract_outputs_and_segments_later_frames() {
 }
 
 fn fixture_copy(name: &str) -> PathBuf {
-    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/handmade_scene");
-    let dst = tmp(name);
-    copy(&src, &dst);
-    dst
-}
-
-fn copy(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to).unwrap();
-    for e in std::fs::read_dir(from).unwrap() {
-        let e = e.unwrap();
-        if e.file_type().unwrap().is_dir() {
-            copy(&e.path(), &to.join(e.file_name()));
-        } else {
-            std::fs::copy(e.path(), to.join(e.file_name())).unwrap();
-        }
-    }
+    common::fixture_copy(&format!("classify-{name}"))
 }
 
 fn expect_exit_2(scene: &Path, words: &str) {

@@ -1,32 +1,15 @@
 //! Every bad input of CONTRACT §1 gets exit code 2 and one line on stderr naming the file and
 //! the problem, never a panic. Each case copies the hand-made fixture scene and breaks one thing.
 
+mod common;
+
+use common::fixture;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-fn fixture() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/handmade_scene")
-}
-
-fn copy_dir(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to).unwrap();
-    for e in std::fs::read_dir(from).unwrap() {
-        let e = e.unwrap();
-        let target = to.join(e.file_name());
-        if e.file_type().unwrap().is_dir() {
-            copy_dir(&e.path(), &target);
-        } else {
-            std::fs::copy(e.path(), target).unwrap();
-        }
-    }
-}
-
 /// A fresh copy of the fixture in a temp folder unique to `name`.
 fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("endofuse-bad-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    copy_dir(&fixture(), &dir);
-    dir
+    common::fixture_copy(&format!("bad-{name}"))
 }
 
 fn edit_json(dir: &Path, f: impl FnOnce(&mut serde_json::Value)) {

@@ -1,6 +1,8 @@
 //! End to end: `synth` writes a scene that `info` accepts, with consistent ground truth; the
 //! demo builds in memory; the README's ground-truth picture comes from here.
 
+mod common;
+
 use endofuse::Scene;
 use endofuse::scene::FrameCheck;
 use endofuse::scene::labels::read_label_png;
@@ -10,21 +12,7 @@ use std::path::Path;
 use std::process::Command;
 
 fn synth_dir(name: &str, args: &[&str]) -> std::path::PathBuf {
-    let dir = std::env::temp_dir().join(format!("endofuse-synth-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    let out = Command::new(env!("CARGO_BIN_EXE_endofuse"))
-        .arg("synth")
-        .arg("--out")
-        .arg(&dir)
-        .args(args)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    dir
+    common::synth(&format!("synth-{name}"), args)
 }
 
 #[test]

@@ -1,43 +1,31 @@
 //! `endofuse track` end to end on phantoms: outputs exactly as CONTRACT §3, segmentation and
 //! hidden-structure accuracy against ground truth, automatic initialisation, and bad input.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
 fn tmp(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("endofuse-track-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    d
+    common::scratch_dir(&format!("track-{name}"))
 }
 
 fn synth(name: &str, extra: &[&str]) -> PathBuf {
-    let dir = tmp(name);
-    let out = Command::new(env!("CARGO_BIN_EXE_endofuse"))
-        .args([
-            "synth",
-            "--frames",
-            "6",
-            "--seed",
-            "4",
-            "--width",
-            "320",
-            "--height",
-            "180",
-            "--noise",
-            "0.02",
-            "--no-zoom",
-        ])
-        .args(extra)
-        .arg("--out")
-        .arg(&dir)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    dir
+    let mut args = vec![
+        "--frames",
+        "6",
+        "--seed",
+        "4",
+        "--width",
+        "320",
+        "--height",
+        "180",
+        "--noise",
+        "0.02",
+        "--no-zoom",
+    ];
+    args.extend_from_slice(extra);
+    common::synth(&format!("track-{name}"), &args)
 }
 
 fn track(scene: &Path, out: &Path, args: &[&str]) -> std::process::Output {
@@ -51,9 +39,7 @@ fn track(scene: &Path, out: &Path, args: &[&str]) -> std::process::Output {
         .unwrap()
 }
 
-fn json(p: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
-}
+use common::read_json as json;
 
 #[test]
 fn track_writes_the_contract_outputs_and_segments_the_phantom() {

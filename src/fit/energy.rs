@@ -140,6 +140,29 @@ pub struct FrameContext<'a> {
     pub class_of: Vec<Option<usize>>,
 }
 
+impl<'a> FrameContext<'a> {
+    /// The context of a scene: its cameras, and the forest class of each visible structure.
+    pub fn new(model: &'a Model, scene: &'a crate::scene::Scene) -> Self {
+        let classes = crate::appearance::ClassMap::from_scene(scene);
+        let class_of = scene
+            .structures
+            .iter()
+            .map(|s| {
+                if s.visible {
+                    classes.class_of_label(s.label)
+                } else {
+                    None
+                }
+            })
+            .collect();
+        Self {
+            model,
+            cameras: &scene.cameras,
+            class_of,
+        }
+    }
+}
+
 impl FrameContext<'_> {
     /// Builds the lines of every view at the current state and fills their probabilities.
     pub fn build_lines(
@@ -508,21 +531,7 @@ mod tests {
         .unwrap();
         let model = Model::from_scene(&scene);
         let classes = crate::appearance::ClassMap::from_scene(&scene);
-        let ctx = FrameContext {
-            model: &model,
-            cameras: &scene.cameras,
-            class_of: scene
-                .structures
-                .iter()
-                .map(|s| {
-                    if s.visible {
-                        classes.class_of_label(s.label)
-                    } else {
-                        None
-                    }
-                })
-                .collect(),
-        };
+        let ctx = FrameContext::new(&model, &scene);
         let truth = scene.ground_truth.trajectory.as_ref().unwrap().frames[0].clone();
         let mut q = [0.0; 12];
         q.copy_from_slice(&truth.affine);

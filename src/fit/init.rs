@@ -169,21 +169,7 @@ pub fn automatic_pose(
     }
     scored.sort_by(|a, b| b.0.total_cmp(&a.0));
     // Refine the best few rigidly at coarse levels; keep the most confident.
-    let ctx = FrameContext {
-        model,
-        cameras: &scene.cameras,
-        class_of: scene
-            .structures
-            .iter()
-            .map(|s| {
-                if s.visible {
-                    classes.class_of_label(s.label)
-                } else {
-                    None
-                }
-            })
-            .collect(),
-    };
+    let ctx = FrameContext::new(model, scene);
     // A hypothesis is only a guess: hold it lightly so the refinement can turn it by the
     // ~20° between neighbouring hypotheses.
     let params = FitParams {

@@ -209,17 +209,6 @@ pub fn track(
 ) -> Result<(), Error> {
     let model = Model::from_scene(scene);
     let classes = ClassMap::from_scene(scene);
-    let class_of: Vec<Option<usize>> = scene
-        .structures
-        .iter()
-        .map(|s| {
-            if s.visible {
-                classes.class_of_label(s.label)
-            } else {
-                None
-            }
-        })
-        .collect();
     let mut good = start;
     let mut first = true;
     for t in options.frames.0..=options.frames.1 {
@@ -234,11 +223,7 @@ pub fn track(
             .into_iter()
             .map(|f| ViewProbabilities::new(f, LEVELS, classes.len()))
             .collect();
-        let ctx = FrameContext {
-            model: &model,
-            cameras: &scene.cameras,
-            class_of: class_of.clone(),
-        };
+        let ctx = FrameContext::new(&model, scene);
         let params = if first { &options.first } else { &options.next };
         let correct_cameras = options.mode == Mode::LSC
             && (0..=ZOOM_SETTLE_FRAMES).any(|k| t >= k && scene.in_zoom_change(t - k));
@@ -323,21 +308,7 @@ mod tests {
         .unwrap();
         let model = Model::from_scene(&scene);
         let classes = ClassMap::from_scene(&scene);
-        let ctx = FrameContext {
-            model: &model,
-            cameras: &scene.cameras,
-            class_of: scene
-                .structures
-                .iter()
-                .map(|s| {
-                    if s.visible {
-                        classes.class_of_label(s.label)
-                    } else {
-                        None
-                    }
-                })
-                .collect(),
-        };
+        let ctx = FrameContext::new(&model, &scene);
         let truth = &scene.ground_truth.trajectory.as_ref().unwrap().frames[0];
         let start = initial_state(&scene, &model, scene.initial_pose.unwrap());
         let mut views: Vec<ViewProbabilities> = (0..2)

@@ -46,7 +46,7 @@ pub fn paint_strokes(
         let mut heading = rng.range(0.0, std::f64::consts::TAU);
         let mut travelled = 0.0;
         while travelled < length {
-            stamp_within(seeds, region, x, y, radius, value);
+            stamp(seeds, Some(region), x, y, radius, value);
             heading += rng.range(-0.35, 0.35);
             let (nx, ny) = (x + 1.5 * heading.cos(), y + 1.5 * heading.sin());
             if !ok(nx, ny) {
@@ -64,37 +64,25 @@ pub fn paint_strokes(
     }
 }
 
-/// A filled disc of `value`, clipped to `region`: a stroke never labels the wrong class, even
-/// where it passes within a pixel of an edge.
-fn stamp_within(seeds: &mut LabelImage, region: &Mask, cx: f64, cy: f64, radius: f64, value: u8) {
+/// A filled disc of `value`, clipped to `region` when given: a stroke never labels the wrong
+/// class, even where it passes within a pixel of an edge.
+pub fn stamp(
+    seeds: &mut LabelImage,
+    region: Option<&Mask>,
+    cx: f64,
+    cy: f64,
+    radius: f64,
+    value: u8,
+) {
     let r = radius.ceil() as i64;
     for dy in -r..=r {
         for dx in -r..=r {
             let (x, y) = (cx.round() as i64 + dx, cy.round() as i64 + dy);
-            if x >= 0
-                && y >= 0
-                && (x as usize) < seeds.width
-                && (y as usize) < seeds.height
+            let inside =
+                x >= 0 && y >= 0 && (x as usize) < seeds.width && (y as usize) < seeds.height;
+            if inside
                 && ((dx * dx + dy * dy) as f64) <= radius * radius
-                && *region.get(x as usize, y as usize)
-            {
-                seeds.set(x as usize, y as usize, value);
-            }
-        }
-    }
-}
-
-/// A filled disc of `value`.
-pub fn stamp(seeds: &mut LabelImage, cx: f64, cy: f64, radius: f64, value: u8) {
-    let r = radius.ceil() as i64;
-    for dy in -r..=r {
-        for dx in -r..=r {
-            let (x, y) = (cx.round() as i64 + dx, cy.round() as i64 + dy);
-            if x >= 0
-                && y >= 0
-                && (x as usize) < seeds.width
-                && (y as usize) < seeds.height
-                && ((dx * dx + dy * dy) as f64) <= radius * radius
+                && region.is_none_or(|m| *m.get(x as usize, y as usize))
             {
                 seeds.set(x as usize, y as usize, value);
             }
