@@ -144,3 +144,50 @@ fn bad_track_arguments_are_refused() {
     let run = track(&scene, &out, &["--frames", "0..9"]);
     assert_eq!(run.status.code(), Some(2));
 }
+
+#[test]
+fn frames_without_the_organ_are_lost_and_tracking_recovers() {
+    let scene = synth("lost", &[]);
+    // Frames 2–4 show only tissue-coloured haze: the organ is out of view.
+    for t in 2..=4 {
+        for cam in ["left", "right"] {
+            let img = image::RgbImage::from_fn(320, 180, |x, y| {
+                image::Rgb([190 + (x % 7) as u8, 160 + (y % 5) as u8, 80])
+            });
+            img.save(scene.join(format!("{cam}/{t:06}.png"))).unwrap();
+        }
+    }
+    let out = tmp("lost-out");
+    let run = track(&scene, &out, &["--frames", "0..5"]);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let traj = json(&out.join("trajectory.json"));
+    let lost: Vec<bool> = traj["frames"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| f["lost"].as_bool().unwrap())
+        .collect();
+    assert_eq!(
+        lost,
+        vec![false, false, true, true, true, false],
+        "frames 2–4 lost, frame 5 found again"
+    );
+    // Lost frames hold the last good pose.
+    assert_eq!(traj["frames"][3]["affine"], traj["frames"][1]["affine"]);
+    let m = json(&out.join("metrics.json"));
+    assert_eq!(m["lost_frames"], 3);
+    let last = m["dice"]["per_frame"]
+        .as_array()
+        .unwrap()
+        .last()
+        .unwrap()
+        .as_f64()
+        .unwrap();
+    assert!(last > 0.85, "recovered Dice {last}");
+    let _ = std::fs::remove_dir_all(&scene);
+    let _ = std::fs::remove_dir_all(&out);
+}

@@ -20,6 +20,9 @@ use std::sync::atomic::{AtomicBool, Ordering};
 /// Camera correction stays on this many frames after a marked zoom change ends: the
 /// estimate lags the optics by a frame or two.
 pub const ZOOM_SETTLE_FRAMES: usize = 2;
+/// After this many lost frames in a row (and every as many after), try placing the model
+/// afresh.
+pub const REINIT_AFTER_LOST: usize = 3;
 /// Below this confidence a frame counts as lost.
 pub const LOST_CONFIDENCE: f64 = 0.25;
 /// Pyramid levels built per frame.
@@ -211,6 +214,7 @@ pub fn track(
     let classes = ClassMap::from_scene(scene);
     let mut good = start;
     let mut first = true;
+    let mut lost_run = 0usize;
     for t in options.frames.0..=options.frames.1 {
         if cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
             return Err(Error::Cancelled);
@@ -240,7 +244,33 @@ pub fn track(
             // A fit cut short is not a result.
             return Err(Error::Cancelled);
         }
-        let lost = fit.confidence < LOST_CONFIDENCE || fit.lines < 12;
+        let mut fit = fit;
+        let mut lost = fit.confidence < LOST_CONFIDENCE || fit.lines < 12;
+        lost_run = if lost { lost_run + 1 } else { 0 };
+        if lost && lost_run % REINIT_AFTER_LOST == 0 {
+            // Lost for a while: the organ may be back somewhere else. Place it afresh, keeping
+            // the shape and intrinsics learnt before the loss.
+            if let Ok(affine) = super::init::automatic_pose(scene, &model, appearance, t) {
+                let restart = FitState {
+                    affine,
+                    ..good.clone()
+                };
+                let again = fit_frame(
+                    &ctx,
+                    &restart,
+                    &restart,
+                    &mut views,
+                    appearance,
+                    &options.first,
+                    false,
+                );
+                if again.confidence >= LOST_CONFIDENCE && again.lines >= 12 {
+                    fit = again;
+                    lost = false;
+                    lost_run = 0;
+                }
+            }
+        }
         // A lost frame keeps the last good state: nothing learnt from it.
         let state = if lost {
             good.clone()
