@@ -247,7 +247,7 @@ pub fn track(
         let mut fit = fit;
         let mut lost = fit.confidence < LOST_CONFIDENCE || fit.lines < 12;
         lost_run = if lost { lost_run + 1 } else { 0 };
-        if lost && lost_run % REINIT_AFTER_LOST == 0 {
+        if lost && lost_run.is_multiple_of(REINIT_AFTER_LOST) {
             // Lost for a while: the organ may be back somewhere else. Place it afresh, keeping
             // the shape and intrinsics learnt before the loss.
             if let Ok(affine) = super::init::automatic_pose(scene, &model, appearance, t) {
