@@ -191,3 +191,47 @@ fn frames_without_the_organ_are_lost_and_tracking_recovers() {
     let _ = std::fs::remove_dir_all(&scene);
     let _ = std::fs::remove_dir_all(&out);
 }
+
+/// The README's tracking picture: the demo tracked for 10 frames (LSC), last frame of both
+/// views with the fitted structures and the hidden tumour drawn through the kidney.
+#[test]
+fn tracking_overlay_picture() {
+    let out = tmp("picture");
+    let run = track(
+        Path::new("demo"),
+        &out,
+        &["--mode", "LSC", "--frames", "0..9"],
+    );
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let scene = endofuse::Scene::open("demo", endofuse::scene::FrameCheck::Headers).unwrap();
+    let index = |l: u8| scene.structures.iter().position(|s| s.label == l);
+    let mut views = Vec::new();
+    for (c, cam) in scene.cameras.iter().enumerate() {
+        let mut img = (*scene.frame(c, 9).unwrap()).clone();
+        let read = |p: String| endofuse::scene::labels::read_label_png(&out.join(p)).unwrap();
+        endofuse::overlay::draw_labels(
+            &mut img,
+            &read(format!("masks/{}/000009.png", cam.name)),
+            &index,
+            0.3,
+        );
+        endofuse::overlay::draw_hidden(
+            &mut img,
+            &read(format!("hidden/tumour_endo/{}/000009.png", cam.name)).map(|&v| v > 0),
+            2,
+        );
+        views.push(img);
+    }
+    let sheet = endofuse::overlay::tile(&views, 2);
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("screenshots/tracking_overlay.png");
+    if std::env::var_os("UPDATE_SCREENSHOTS").is_some() || !path.exists() {
+        sheet.save(&path).unwrap();
+    }
+    let m = json(&out.join("metrics.json"));
+    assert!(m["dice"]["mean"].as_f64().unwrap() > 0.9, "{m}");
+    let _ = std::fs::remove_dir_all(&out);
+}
