@@ -61,10 +61,15 @@ pub fn summary(scene: &Scene) -> String {
         .collect();
     let _ = writeln!(
         s,
-        "shape model: joint over {} structures, {} shapes {source}; {} PCA modes explain {:.1}% of the variance (1σ moves a vertex {}{} mm RMS)",
+        "shape model: joint over {} structures, {} shapes {source}; {} PCA mode{} {:.1}% of the variance (1σ moves a vertex {}{} mm RMS)",
         scene.structures.len(),
         pca.sample_count,
         pca.mode_count(),
+        if pca.mode_count() == 1 {
+            " explains"
+        } else {
+            "s explain"
+        },
         100.0 * pca.explained_share,
         sigmas.join(", "),
         if pca.mode_count() > 4 { ", …" } else { "" }
