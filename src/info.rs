@@ -53,11 +53,13 @@ pub fn summary(scene: &Scene) -> String {
         CatalogSource::Transferred => "from the organ's catalog, carried to the other structures",
         CatalogSource::Generated => "from generated push/pull deformations",
     };
+    // A unit mode spreads over every vertex: report what 1σ does to a vertex, RMS.
+    let per_vertex = (pca.mean.len().max(1) as f64).sqrt();
     let sigmas: Vec<String> = pca
         .sigma_mm
         .iter()
         .take(4)
-        .map(|v| format!("{v:.1}"))
+        .map(|v| format!("{:.2}", v / per_vertex))
         .collect();
     let _ = writeln!(
         s,
