@@ -98,7 +98,7 @@ pub fn run(
         None => crate::fit::init::automatic_pose(scene, &model, &appearance, frames.0)?,
     };
     let start = initial_state(scene, &model, affine);
-    let options = TrackOptions::new(mode, frames);
+    let options = TrackOptions::new(mode, frames, scene.cameras[0].width);
     let total = frames.1 + 1 - frames.0;
     let anchor_name = model.structures[model.anchor].name.clone();
     let mut trajectory = Trajectory::default();

@@ -260,7 +260,8 @@ fn run(
                 Some(a) => a,
                 None => crate::fit::init::automatic_pose(&scene, &model, appearance, frames.0)?,
             };
-            let options = TrackOptions::new(mode, frames).with_cancel(Some(cancel.clone()));
+            let options = TrackOptions::new(mode, frames, scene.cameras[0].width)
+                .with_cancel(Some(cancel.clone()));
             let total = frames.1 + 1 - frames.0;
             let mut done = 0;
             track(

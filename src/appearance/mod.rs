@@ -184,8 +184,9 @@ fn seeds_origin(scene: &Scene) -> String {
     }
 }
 
-/// Pyramid levels whose features train the forest (the fit's levels 0–2).
-pub const TRAINING_LEVELS: usize = 3;
+/// Pyramid levels whose features train the forest: every level the fit may visit (down to
+/// two below the tracking level of a 1920-wide video).
+pub const TRAINING_LEVELS: usize = 5;
 
 /// Halves a seed image: a pixel keeps a value only where its 2×2 children all have it.
 fn downsample_seeds(seeds: &LabelImage) -> LabelImage {
