@@ -70,6 +70,8 @@ pub struct FitParams {
     pub pose_damping: f64,
     /// Tikhonov weight (relative to the data) of the shape towards the previous frame's.
     pub shape_damping: f64,
+    /// Gauss–Newton steps taken on one set of lines before they are rebuilt.
+    pub rebuild_every: usize,
     /// Raised by whoever wants the fit to stop: checked between Gauss–Newton steps, so a
     /// cancel is answered within one step (a few ms), not one frame.
     pub cancel: Option<Arc<AtomicBool>>,
@@ -88,6 +90,7 @@ impl Default for FitParams {
             strain_prior: 1.0,
             pose_damping: 1.0,
             shape_damping: 0.0,
+            rebuild_every: 3,
             cancel: None,
         }
     }
@@ -403,7 +406,8 @@ pub fn fit_frame(
                 } else {
                     block
                 };
-                for _ in 0..params.steps {
+                let mut lines = Vec::new();
+                for k in 0..params.steps {
                     if params
                         .cancel
                         .as_ref()
@@ -411,7 +415,11 @@ pub fn fit_frame(
                     {
                         break;
                     }
-                    let lines = ctx.build_lines(&state, views, appearance, &ep);
+                    // Lines are rebuilt every `rebuild_every` steps: rim points re-project with
+                    // the state, and ±10 px of samples outlast a step or two of motion.
+                    if k % params.rebuild_every.max(1) == 0 {
+                        lines = ctx.build_lines(&state, views, appearance, &ep);
+                    }
                     iterations += 1;
                     match step(ctx, &lines, &state, prev, block, &ep, params) {
                         Some(next) => state = next,
