@@ -307,20 +307,24 @@ fn box_sum64(table: &[u64], w: usize, h: usize, x: usize, y: usize, r: usize) ->
 
 /// Halves a frame by 2×2 averaging (one pyramid level).
 pub fn downsample(frame: &RgbImage) -> RgbImage {
-    let (w, h) = ((frame.width() / 2).max(1), (frame.height() / 2).max(1));
-    RgbImage::from_fn(w, h, |x, y| {
-        let mut acc = [0u32; 3];
-        for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
-            let p = frame.get_pixel(
-                (2 * x + dx).min(frame.width() - 1),
-                (2 * y + dy).min(frame.height() - 1),
-            );
-            for (a, v) in acc.iter_mut().zip(p.0) {
-                *a += v as u32;
+    let (sw, sh) = (frame.width() as usize, frame.height() as usize);
+    let (w, h) = ((sw / 2).max(1), (sh / 2).max(1));
+    let src = frame.as_raw();
+    let mut out = vec![0u8; w * h * 3];
+    out.par_chunks_mut(w * 3).enumerate().for_each(|(y, row)| {
+        let (y0, y1) = ((2 * y).min(sh - 1), (2 * y + 1).min(sh - 1));
+        for x in 0..w {
+            let (x0, x1) = ((2 * x).min(sw - 1), (2 * x + 1).min(sw - 1));
+            for c in 0..3 {
+                let v = src[(y0 * sw + x0) * 3 + c] as u32
+                    + src[(y0 * sw + x1) * 3 + c] as u32
+                    + src[(y1 * sw + x0) * 3 + c] as u32
+                    + src[(y1 * sw + x1) * 3 + c] as u32;
+                row[x * 3 + c] = ((v + 2) / 4) as u8;
             }
         }
-        image::Rgb(acc.map(|v| ((v + 2) / 4) as u8))
-    })
+    });
+    RgbImage::from_raw(w as u32, h as u32, out).unwrap_or_else(|| RgbImage::new(w as u32, h as u32))
 }
 
 #[cfg(test)]

@@ -395,6 +395,8 @@ pub fn fit_frame(
         .copied()
         .filter(|&l| l < views.first().map(|v| v.level_count()).unwrap_or(1))
         .collect();
+    let mut last_lines: Vec<Line> = Vec::new();
+    let mut last_level = None;
     for &level in &levels {
         let ep = energy_params(level);
         for _ in 0..params.rounds {
@@ -420,17 +422,25 @@ pub fn fit_frame(
                     if k % params.rebuild_every.max(1) == 0 {
                         lines = ctx.build_lines(&state, views, appearance, &ep);
                     }
+                    last_level = Some(level);
                     iterations += 1;
                     match step(ctx, &lines, &state, prev, block, &ep, params) {
                         Some(next) => state = next,
                         None => break,
                     }
                 }
+                last_lines = lines;
             }
         }
     }
-    let ep = energy_params(levels.last().copied().unwrap_or(0));
-    let lines = ctx.build_lines(&state, views, appearance, &ep);
+    let final_level = levels.last().copied().unwrap_or(0);
+    let ep = energy_params(final_level);
+    // The last block's lines serve for the energy and confidence when they are at this level.
+    let lines = if last_level == Some(final_level) && !last_lines.is_empty() {
+        last_lines
+    } else {
+        ctx.build_lines(&state, views, appearance, &ep)
+    };
     let energy = ctx.energy(&lines, &state, &ep);
     FrameFit {
         confidence: confidence(&lines, &state, ctx, &ep),

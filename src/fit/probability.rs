@@ -8,40 +8,53 @@ use image::RgbImage;
 use std::sync::Arc;
 
 struct Level {
-    image: Arc<RgbImage>,
+    /// Made on first use: tracked frames never need the coarse levels.
+    image: Option<Arc<RgbImage>>,
     features: Option<FrameFeatures>,
     /// (x, y, w, h) the features cover.
     region: Option<(usize, usize, usize, usize)>,
-    /// `classes` probabilities per pixel; NaN where not yet computed.
+    /// `classes` probabilities per pixel; NaN where not yet computed (empty until first use).
     probs: Vec<f32>,
 }
 
 /// Lazily classified pyramid of one view's frame.
 pub struct ViewProbabilities {
     levels: Vec<Level>,
+    sizes: Vec<(usize, usize)>,
     classes: usize,
 }
 
 impl ViewProbabilities {
     pub fn new(frame: Arc<RgbImage>, levels: usize, classes: usize) -> Self {
-        let mut out: Vec<Level> = Vec::new();
-        let mut img = frame;
-        for l in 0..levels.max(1) {
-            if l > 0 {
-                img = Arc::new(downsample(&img));
-            }
-            let n = img.width() as usize * img.height() as usize;
-            out.push(Level {
-                image: img.clone(),
+        let (w, h) = (frame.width() as usize, frame.height() as usize);
+        let sizes: Vec<(usize, usize)> = (0..levels.max(1))
+            .map(|l| ((w >> l).max(1), (h >> l).max(1)))
+            .collect();
+        let mut out: Vec<Level> = (0..sizes.len())
+            .map(|_| Level {
+                image: None,
                 features: None,
                 region: None,
-                probs: vec![f32::NAN; n * classes],
-            });
-        }
+                probs: Vec::new(),
+            })
+            .collect();
+        out[0].image = Some(frame);
         Self {
             levels: out,
+            sizes,
             classes,
         }
+    }
+
+    /// The image of a level, downsampling from the finer one on first use.
+    fn image(&mut self, level: usize) -> Arc<RgbImage> {
+        if let Some(img) = &self.levels[level].image {
+            return img.clone();
+        }
+        let finer = self.image(level - 1);
+        let img = Arc::new(downsample(&finer));
+        self.levels[level].image = Some(img.clone());
+        img
     }
 
     /// Probabilities made from a label image instead of the forest: `confidence` for the
@@ -65,6 +78,7 @@ impl ViewProbabilities {
             .collect();
         let (mut w, mut h) = (labels.width, labels.height);
         let mut out = Vec::new();
+        let mut sizes = Vec::new();
         for l in 0..levels.max(1) {
             if l > 0 {
                 let (nw, nh) = ((w / 2).max(1), (h / 2).max(1));
@@ -83,8 +97,9 @@ impl ViewProbabilities {
                 w = nw;
                 h = nh;
             }
+            sizes.push((w, h));
             out.push(Level {
-                image: Arc::new(RgbImage::new(w as u32, h as u32)),
+                image: None,
                 features: None,
                 region: None,
                 probs: probs.clone(),
@@ -92,6 +107,7 @@ impl ViewProbabilities {
         }
         Self {
             levels: out,
+            sizes,
             classes: k,
         }
     }
@@ -101,15 +117,18 @@ impl ViewProbabilities {
     }
 
     pub fn size(&self, level: usize) -> (usize, usize) {
-        let img = &self.levels[level].image;
-        (img.width() as usize, img.height() as usize)
+        self.sizes[level]
     }
 
     /// Classifies the listed pixel indices of `level` that are not known yet.
     pub fn ensure(&mut self, appearance: &Appearance, level: usize, pixels: &[u32]) {
         let k = self.classes;
-        let lv = &mut self.levels[level];
-        let w = lv.image.width();
+        let (w, h) = self.sizes[level];
+        if self.levels[level].probs.is_empty() {
+            self.levels[level].probs = vec![f32::NAN; w * h * k];
+        }
+        let lv = &self.levels[level];
+        let w = w as u32;
         let mut missing: Vec<u32> = pixels
             .iter()
             .copied()
@@ -120,6 +139,8 @@ impl ViewProbabilities {
         }
         missing.sort_unstable();
         missing.dedup();
+        let image = self.image(level);
+        let lv = &mut self.levels[level];
         // Features over a region around the requested pixels only; grown (rarely: the model
         // moves little within a frame) when a request falls outside it.
         let covered = lv.features.as_ref().is_some_and(|f| {
@@ -143,13 +164,13 @@ impl ViewProbabilities {
                 y1 = y1.max(oy + oh - 1);
             }
             // Margin: the widest window, plus slack so small motions need no rebuild.
-            let margin = FrameFeatures::region(&lv.image, 0, 0, 1, 1).reach() + 16;
-            let (iw, ih) = (lv.image.width() as usize, lv.image.height() as usize);
+            let margin = FrameFeatures::region(&image, 0, 0, 1, 1).reach() + 16;
+            let (iw, ih) = (image.width() as usize, image.height() as usize);
             let (rx0, ry0) = (x0.saturating_sub(margin), y0.saturating_sub(margin));
             let (rx1, ry1) = ((x1 + margin).min(iw - 1), (y1 + margin).min(ih - 1));
             lv.region = Some((rx0, ry0, rx1 + 1 - rx0, ry1 + 1 - ry0));
             lv.features = Some(FrameFeatures::region(
-                &lv.image,
+                &image,
                 rx0,
                 ry0,
                 rx1 + 1 - rx0,
