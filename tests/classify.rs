@@ -3,6 +3,8 @@
 
 mod common;
 
+use std::ffi::OsStr;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -19,19 +21,14 @@ fn classify_writes_the_contract_outputs_and_segments_later_frames() {
         ],
     );
     let dir = tmp("out");
-    let out = Command::new(env!("CARGO_BIN_EXE_endofuse"))
-        .arg("classify")
-        .arg(&scene)
-        .arg("--out")
-        .arg(&dir)
-        .args(["--frames", "2..7"])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    common::run_ok(&[
+        OsStr::new("classify"),
+        scene.as_os_str(),
+        OsStr::new("--out"),
+        dir.as_os_str(),
+        OsStr::new("--frames"),
+        OsStr::new("2..7"),
+    ]);
     for cam in ["left", "right"] {
         for class in ["background", "kidney", "tumour_exo"] {
             assert!(
@@ -86,18 +83,12 @@ fn expect_exit_2(scene: &Path, words: &str) {
 fn the_handmade_scene_classifies() {
     let dir = tmp("handmade");
     let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/handmade_scene");
-    let out = Command::new(env!("CARGO_BIN_EXE_endofuse"))
-        .arg("classify")
-        .arg(&scene)
-        .arg("--out")
-        .arg(&dir)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    common::run_ok(&[
+        OsStr::new("classify"),
+        scene.as_os_str(),
+        OsStr::new("--out"),
+        dir.as_os_str(),
+    ]);
     assert!(dir.join("prob/tumour/right/000001.png").exists());
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -3,13 +3,14 @@
 
 mod common;
 
+use std::ffi::OsStr;
+
 use endofuse::Scene;
 use endofuse::scene::FrameCheck;
 use endofuse::scene::labels::read_label_png;
 use endofuse::synth::phantom::{Phantom, k1_for_focal};
 use endofuse::synth::{SynthOptions, memory_scene};
 use std::path::Path;
-use std::process::Command;
 
 fn synth_dir(name: &str, args: &[&str]) -> std::path::PathBuf {
     common::synth(&format!("synth-{name}"), args)
@@ -23,16 +24,7 @@ fn synth_writes_a_scene_info_accepts_with_consistent_ground_truth() {
             "--frames", "10", "--seed", "3", "--width", "192", "--height", "108", "--noise", "0.03",
         ],
     );
-    let out = Command::new(env!("CARGO_BIN_EXE_endofuse"))
-        .arg("info")
-        .arg(&dir)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = common::run_ok(&[OsStr::new("info"), dir.as_os_str()]);
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains("baseline 4.50 mm"), "{text}");
     assert!(text.contains("seeds: frames 0–2"), "{text}");

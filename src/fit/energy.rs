@@ -14,7 +14,7 @@ use super::model::Model;
 use super::probability::ViewProbabilities;
 use crate::appearance::Appearance;
 use crate::geometry::{Affine, Camera, Intrinsics};
-use crate::render::raster::{RasterOptions, RenderObject, rasterize};
+use crate::render::raster::{RasterOptions, rasterize};
 use glam::{DVec2, DVec3};
 
 /// Pose, shape and camera parameters of one frame.
@@ -181,13 +181,7 @@ impl FrameContext<'_> {
             let visible: Vec<usize> = (0..self.model.structures.len())
                 .filter(|&i| self.class_of[i].is_some())
                 .collect();
-            let objects: Vec<RenderObject> = visible
-                .iter()
-                .map(|&i| RenderObject {
-                    vertices: &posed[i],
-                    faces: &self.model.structures[i].faces,
-                })
-                .collect();
+            let objects = self.model.objects(&posed, &visible);
             // Visibility is judged one level coarser: a quarter of the pixels, and rim points
             // only need "this structure just inside, something else just outside".
             let vis_size = ((size.0 / 2).max(1), (size.1 / 2).max(1));

@@ -15,7 +15,7 @@ use crate::error::{Error, InputError};
 use crate::geometry::pose::rotation_from_vector;
 use crate::geometry::{Affine, Camera};
 use crate::plane::Plane;
-use crate::render::raster::{RasterOptions, RenderObject, ViewRaster, rasterize};
+use crate::render::raster::{RasterOptions, ViewRaster, rasterize};
 use crate::scene::Scene;
 use glam::{DMat3, DVec2, DVec3};
 use std::sync::Arc;
@@ -116,18 +116,10 @@ pub fn automatic_pose(
     let ray = DVec3::new(ray.x, ray.y, 1.0);
     let mean = model.deformed(&vec![0.0; model.shape.mode_count()]);
     let centre_pre = crate::geometry::mesh::vertex_mean(&mean[model.anchor]);
-    let visible: Vec<usize> = (0..model.structures.len())
-        .filter(|&i| model.structures[i].visible)
-        .collect();
+    let visible = model.indices(true);
     let rasters = |affine: &Affine, cams: &[Camera]| -> Vec<ViewRaster> {
         let posed = model.posed(affine, &mean);
-        let objects: Vec<RenderObject> = visible
-            .iter()
-            .map(|&i| RenderObject {
-                vertices: &posed[i],
-                faces: &model.structures[i].faces,
-            })
-            .collect();
+        let objects = model.objects(&posed, &visible);
         cams.iter()
             .map(|c| rasterize(c, &objects, &RasterOptions::default()))
             .collect()

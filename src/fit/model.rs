@@ -3,6 +3,7 @@
 //! (silhouette-generating edges) is found for any camera.
 
 use crate::geometry::{Affine, Mesh};
+use crate::render::RenderObject;
 use crate::scene::Scene;
 use crate::shape::JointShapeModel;
 use glam::DVec3;
@@ -71,6 +72,28 @@ impl Model {
     /// Deformed preoperative vertices of every structure for weights `w`.
     pub fn deformed(&self, w: &[f64]) -> Vec<Vec<DVec3>> {
         self.shape.instance(w)
+    }
+
+    /// Render objects for the structures `which`, from their posed vertices.
+    pub fn objects<'a>(
+        &'a self,
+        posed: &'a [Vec<DVec3>],
+        which: &[usize],
+    ) -> Vec<RenderObject<'a>> {
+        which
+            .iter()
+            .map(|&i| RenderObject {
+                vertices: &posed[i],
+                faces: &self.structures[i].faces,
+            })
+            .collect()
+    }
+
+    /// Indices of the visible (or hidden) structures.
+    pub fn indices(&self, visible: bool) -> Vec<usize> {
+        (0..self.structures.len())
+            .filter(|&i| self.structures[i].visible == visible)
+            .collect()
     }
 
     /// Vertices in camera-0 coordinates.

@@ -11,7 +11,7 @@ use crate::appearance::{Appearance, ClassMap};
 use crate::error::Error;
 use crate::geometry::{Affine, Camera};
 use crate::plane::{LabelImage, Mask};
-use crate::render::raster::{RasterOptions, RenderObject, rasterize};
+use crate::render::raster::{RasterOptions, rasterize};
 use crate::scene::Scene;
 use glam::DVec3;
 use std::sync::Arc;
@@ -163,17 +163,9 @@ pub fn render_state(scene: &Scene, model: &Model, state: &FitState) -> Rendered 
     let deformed = model.deformed(&state.shape);
     let posed = model.posed(&state.affine, &deformed);
     let cams = cameras_of(scene, state);
-    let visible: Vec<usize> = (0..model.structures.len())
-        .filter(|&i| model.structures[i].visible)
-        .collect();
+    let visible = model.indices(true);
     let labels_of: Vec<u8> = visible.iter().map(|&i| model.structures[i].label).collect();
-    let objects: Vec<RenderObject> = visible
-        .iter()
-        .map(|&i| RenderObject {
-            vertices: &posed[i],
-            faces: &model.structures[i].faces,
-        })
-        .collect();
+    let objects = model.objects(&posed, &visible);
     let labels = cams
         .iter()
         .map(|c| rasterize(c, &objects, &RasterOptions::default()).label_image(&labels_of))
@@ -181,10 +173,7 @@ pub fn render_state(scene: &Scene, model: &Model, state: &FitState) -> Rendered 
     let hidden = (0..model.structures.len())
         .filter(|&i| !model.structures[i].visible)
         .map(|i| {
-            let obj = [RenderObject {
-                vertices: &posed[i],
-                faces: &model.structures[i].faces,
-            }];
+            let obj = model.objects(&posed, &[i]);
             (
                 model.structures[i].name.clone(),
                 cams.iter()

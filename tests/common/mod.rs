@@ -36,21 +36,9 @@ pub fn fixture_copy(tag: &str) -> PathBuf {
     dir
 }
 
-/// Runs `endofuse` with `args`.
-pub fn endofuse(args: &[&std::ffi::OsStr]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_endofuse"))
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-/// `endofuse synth --out <scratch> ARGS`, asserting success.
-pub fn synth(tag: &str, args: &[&str]) -> PathBuf {
-    let dir = scratch_dir(tag);
+/// Runs `endofuse ARGS` and asserts that it succeeded.
+pub fn run_ok<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> Output {
     let out = Command::new(env!("CARGO_BIN_EXE_endofuse"))
-        .arg("synth")
-        .arg("--out")
-        .arg(&dir)
         .args(args)
         .output()
         .unwrap();
@@ -59,6 +47,15 @@ pub fn synth(tag: &str, args: &[&str]) -> PathBuf {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
+    out
+}
+
+/// `endofuse synth --out <scratch> ARGS`, asserting success.
+pub fn synth(tag: &str, args: &[&str]) -> PathBuf {
+    let dir = scratch_dir(tag);
+    let mut all: Vec<std::ffi::OsString> = vec!["synth".into(), "--out".into(), dir.clone().into()];
+    all.extend(args.iter().map(|a| a.into()));
+    run_ok(&all);
     dir
 }
 
