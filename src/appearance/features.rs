@@ -76,6 +76,22 @@ pub struct FrameFeatures {
     full: (usize, usize),
 }
 
+/// How far (px) from a pixel the features of a `width`-wide frame look: the widest window
+/// plus the gradient's two pixels.
+pub fn reach_for_width(width: usize) -> usize {
+    [
+        HIST_RADIUS_960,
+        SMALL_RADIUS_960,
+        LARGE_RADIUS_960,
+        CONTEXT_RADIUS_960,
+    ]
+    .iter()
+    .map(|&r| radius_for(width, r))
+    .max()
+    .unwrap_or(1)
+        + 2
+}
+
 fn radius_for(width: usize, r960: f64) -> usize {
     ((r960 * width as f64 / 960.0).round() as usize).max(1)
 }
@@ -103,7 +119,7 @@ impl FrameFeatures {
 
     /// Largest window radius (px) any feature reaches, plus the gradient's.
     pub fn reach(&self) -> usize {
-        self.radii.iter().copied().max().unwrap_or(1) + 2
+        reach_for_width(self.full.0)
     }
 
     /// Does the full-frame pixel (x, y) get exactly its whole-frame features here? True when
@@ -275,15 +291,22 @@ fn integral(w: usize, h: usize, value: impl Fn(usize) -> u32) -> Vec<u32> {
     out
 }
 
-/// Sum and pixel count of the window of radius r around (x, y), clipped to the image.
+/// Corners (x0, y0, x1, y1; end exclusive) of the window of radius r around (x, y), clipped
+/// to a w × h image.
 #[inline]
-fn box_sum(table: &[u32], w: usize, h: usize, x: usize, y: usize, r: usize) -> (u32, u32) {
-    let (x0, y0, x1, y1) = (
+fn window(w: usize, h: usize, x: usize, y: usize, r: usize) -> (usize, usize, usize, usize) {
+    (
         x.saturating_sub(r),
         y.saturating_sub(r),
         (x + r + 1).min(w),
         (y + r + 1).min(h),
-    );
+    )
+}
+
+/// Sum and pixel count of the window of radius r around (x, y), clipped to the image.
+#[inline]
+fn box_sum(table: &[u32], w: usize, h: usize, x: usize, y: usize, r: usize) -> (u32, u32) {
+    let (x0, y0, x1, y1) = window(w, h, x, y, r);
     let s = w + 1;
     let sum = table[y1 * s + x1]
         .wrapping_sub(table[y0 * s + x1])
@@ -294,12 +317,7 @@ fn box_sum(table: &[u32], w: usize, h: usize, x: usize, y: usize, r: usize) -> (
 
 #[inline]
 fn box_sum64(table: &[u64], w: usize, h: usize, x: usize, y: usize, r: usize) -> (u64, u64) {
-    let (x0, y0, x1, y1) = (
-        x.saturating_sub(r),
-        y.saturating_sub(r),
-        (x + r + 1).min(w),
-        (y + r + 1).min(h),
-    );
+    let (x0, y0, x1, y1) = window(w, h, x, y, r);
     let s = w + 1;
     let sum = table[y1 * s + x1] + table[y0 * s + x0] - table[y0 * s + x1] - table[y1 * s + x0];
     (sum, ((x1 - x0) * (y1 - y0)) as u64)

@@ -195,12 +195,17 @@ impl FrameContext<'_> {
             for (oi, &si) in visible.iter().enumerate() {
                 let st = &self.model.structures[si];
                 let verts = &posed[si];
-                let facing = |f: u32| {
-                    let [a, b, c] = st.faces[f as usize].map(|k| verts[k as usize]);
-                    (b - a).cross(c - a).dot(a - centre) < 0.0
-                };
+                // Which faces look at the camera: once per face, not once per edge side.
+                let facing: Vec<bool> = st
+                    .faces
+                    .iter()
+                    .map(|f| {
+                        let [a, b, c] = f.map(|k| verts[k as usize]);
+                        (b - a).cross(c - a).dot(a - centre) < 0.0
+                    })
+                    .collect();
                 for e in st.edges.iter().filter(|e| !e.boundary) {
-                    let (f0, f1) = (facing(e.faces[0]), facing(e.faces[1]));
+                    let (f0, f1) = (facing[e.faces[0] as usize], facing[e.faces[1] as usize]);
                     if f0 == f1 {
                         continue;
                     }

@@ -164,7 +164,7 @@ impl ViewProbabilities {
                 y1 = y1.max(oy + oh - 1);
             }
             // Margin: the widest window, plus slack so small motions need no rebuild.
-            let margin = FrameFeatures::region(&image, 0, 0, 1, 1).reach() + 16;
+            let margin = crate::appearance::features::reach_for_width(image.width() as usize) + 16;
             let (iw, ih) = (image.width() as usize, image.height() as usize);
             let (rx0, ry0) = (x0.saturating_sub(margin), y0.saturating_sub(margin));
             let (rx1, ry1) = ((x1 + margin).min(iw - 1), (y1 + margin).min(ih - 1));

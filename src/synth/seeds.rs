@@ -90,6 +90,21 @@ pub fn stamp(
     }
 }
 
+/// The pixels of `region` within `distance_px` of any pixel of `other`.
+fn near(region: &Mask, other: &Mask, distance_px: f64) -> Mask {
+    let d2 = squared_edt(other);
+    Plane {
+        width: region.width,
+        height: region.height,
+        data: region
+            .data
+            .iter()
+            .zip(&d2.data)
+            .map(|(&r, &d)| r && (d as f64) <= distance_px * distance_px)
+            .collect(),
+    }
+}
+
 /// Seeds for one view of one frame, from its ground-truth labels and tool mask.
 pub fn seeds_for_view(
     labels: &LabelImage,
@@ -121,18 +136,8 @@ pub fn seeds_for_view(
     );
     // Users also paint right around the organ, where mistakes would cost most: background
     // strokes in a ring outside the anatomy.
-    let to_anatomy = squared_edt(&labels.map(|&l| l != 0));
     let ring_px = 45.0 * labels.width.max(labels.height) as f64 / 960.0;
-    let ring = Plane {
-        width: labels.width,
-        height: labels.height,
-        data: tissue_background
-            .data
-            .iter()
-            .zip(&to_anatomy.data)
-            .map(|(&b, &d)| b && (d as f64) <= ring_px * ring_px)
-            .collect(),
-    };
+    let ring = near(&tissue_background, &labels.map(|&l| l != 0), ring_px);
     paint_strokes(
         &mut seeds,
         &ring,
@@ -156,17 +161,7 @@ pub fn seeds_for_view(
         let region = labels.mask_of(l);
         paint_strokes(&mut seeds, &region, l, strokes, radius, CLEARANCE_PX, rng);
         // And one stroke along the inside of its edge, as a careful user traces it.
-        let to_outside = squared_edt(&region.map(|&r| !r));
-        let rim = Plane {
-            width: region.width,
-            height: region.height,
-            data: region
-                .data
-                .iter()
-                .zip(&to_outside.data)
-                .map(|(&r, &d)| r && (d as f64) <= ring_px * ring_px)
-                .collect(),
-        };
+        let rim = near(&region, &region.map(|&r| !r), ring_px);
         paint_strokes(&mut seeds, &rim, l, 1, radius, EDGE_CLEARANCE_PX, rng);
     }
     seeds
