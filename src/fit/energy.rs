@@ -317,11 +317,18 @@ impl FrameContext<'_> {
         (state.affine.apply(pre), pre)
     }
 
-    /// Projected rim point at the line's level.
-    fn project(&self, line: &Line, state: &FitState, p: DVec3, level: usize) -> Option<DVec2> {
-        let cam = &self.cameras[line.view];
-        let i = &state.intrinsics[line.view];
-        let c = i.project(cam.to_camera(p))?;
+    /// Where the line's contour point c is now: the deformed, posed rim point projected into
+    /// the line's view at `level` (None behind the camera). `deformed` is the model's shape
+    /// instance for `state`.
+    pub fn contour_point(
+        &self,
+        line: &Line,
+        state: &FitState,
+        deformed: &[Vec<DVec3>],
+        level: usize,
+    ) -> Option<DVec2> {
+        let (p, _) = self.rim_point(line, state, deformed);
+        let c = state.intrinsics[line.view].project(self.cameras[line.view].to_camera(p))?;
         Some(to_level(c, level_scale(level)))
     }
 
@@ -331,8 +338,7 @@ impl FrameContext<'_> {
         lines
             .iter()
             .map(|line| {
-                let (p, _) = self.rim_point(line, state, &deformed);
-                let Some(c) = self.project(line, state, p, params.level) else {
+                let Some(c) = self.contour_point(line, state, &deformed, params.level) else {
                     return 0.0;
                 };
                 line.samples
@@ -434,8 +440,7 @@ impl FrameContext<'_> {
         let deformed = self.model.deformed(&state.shape);
         let mut g = vec![0.0; block.size(self.model)];
         for line in lines {
-            let (p, _) = self.rim_point(line, state, &deformed);
-            let Some(c) = self.project(line, state, p, params.level) else {
+            let Some(c) = self.contour_point(line, state, &deformed, params.level) else {
                 continue;
             };
             let Some(j) = self.point_jacobian(line, state, &deformed, block, params.level) else {

@@ -188,15 +188,9 @@ pub fn step(
     let mut h = DMatrix::<f64>::zeros(n, n);
     let mut b = DVector::<f64>::zeros(n);
     for line in lines {
-        let cam = &ctx.cameras[line.view];
-        let d = &deformed[line.structure];
-        let p = state
-            .affine
-            .apply(d[line.a as usize].lerp(d[line.b as usize], line.t));
-        let Some(c) = state.intrinsics[line.view].project(cam.to_camera(p)) else {
+        let Some(c) = ctx.contour_point(line, state, &deformed, ep.level) else {
             continue;
         };
-        let c = super::energy::to_level(c, super::energy::level_scale(ep.level));
         let Some(j) = ctx.point_jacobian(line, state, &deformed, block, ep.level) else {
             continue;
         };
@@ -457,15 +451,9 @@ fn confidence(lines: &[Line], state: &FitState, ctx: &FrameContext, ep: &EnergyP
     let mut sum = 0.0;
     let mut n = 0usize;
     for line in lines {
-        let d = &deformed[line.structure];
-        let p = state
-            .affine
-            .apply(d[line.a as usize].lerp(d[line.b as usize], line.t));
-        let Some(c) = state.intrinsics[line.view].project(ctx.cameras[line.view].to_camera(p))
-        else {
+        let Some(c) = ctx.contour_point(line, state, &deformed, ep.level) else {
             continue;
         };
-        let c = super::energy::to_level(c, super::energy::level_scale(ep.level));
         let (mut pin, mut nin, mut pout, mut nout) = (0.0, 0, 0.0, 0);
         for s in &line.samples {
             let dist = line.normal.dot(c - s.pos);

@@ -32,6 +32,11 @@ pub fn fit_level(width: u32) -> usize {
     level
 }
 
+/// Too few lines or too little confidence: the organ is not where the fit put it.
+fn is_lost(fit: &super::optimizer::FrameFit) -> bool {
+    fit.confidence < LOST_CONFIDENCE || fit.lines < 12
+}
+
 /// Below this confidence a frame counts as lost.
 pub const LOST_CONFIDENCE: f64 = 0.25;
 
@@ -219,6 +224,7 @@ pub fn track(
     let mut good = start;
     let mut first = true;
     let mut lost_run = 0usize;
+    let ctx = FrameContext::new(&model, scene);
     for t in options.frames.0..=options.frames.1 {
         if cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
             return Err(Error::Cancelled);
@@ -232,11 +238,10 @@ pub fn track(
             .into_iter()
             .map(|f| ViewProbabilities::new(f, levels, classes.len()))
             .collect();
-        let ctx = FrameContext::new(&model, scene);
         let params = if first { &options.first } else { &options.next };
         let correct_cameras = options.mode == Mode::LSC
             && (0..=ZOOM_SETTLE_FRAMES).any(|k| t >= k && scene.in_zoom_change(t - k));
-        let fit = fit_frame(
+        let mut fit = fit_frame(
             &ctx,
             &good,
             &good,
@@ -249,8 +254,7 @@ pub fn track(
             // A fit cut short is not a result.
             return Err(Error::Cancelled);
         }
-        let mut fit = fit;
-        let mut lost = fit.confidence < LOST_CONFIDENCE || fit.lines < 12;
+        let mut lost = is_lost(&fit);
         lost_run = if lost { lost_run + 1 } else { 0 };
         if lost && lost_run.is_multiple_of(REINIT_AFTER_LOST) {
             // Lost for a while: the organ may be back somewhere else. Place it afresh, keeping
@@ -269,7 +273,7 @@ pub fn track(
                     &options.first,
                     false,
                 );
-                if again.confidence >= LOST_CONFIDENCE && again.lines >= 12 {
+                if !is_lost(&again) {
                     fit = again;
                     lost = false;
                     lost_run = 0;
