@@ -591,13 +591,11 @@ impl TreeBuilder<'_> {
                 }
             }
         }
-        let Some((score, feature, threshold)) =
-            best.filter(|(s, _, _)| *s < parent_impurity - 1e-9)
+        let Some((_, feature, threshold)) = best.filter(|(s, _, _)| *s < parent_impurity - 1e-9)
         else {
             self.make_leaf(node, idx);
             return;
         };
-        let _ = score;
         // Partition in place: ≤ threshold first.
         let mut split = 0;
         for j in 0..idx.len() {
