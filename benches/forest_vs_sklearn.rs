@@ -84,6 +84,12 @@ fn main() {
     {
         params.min_samples_leaf = d;
     }
+    if let Some(d) = std::env::var("FOREST_SAMPLES")
+        .ok()
+        .and_then(|v| v.parse().ok())
+    {
+        params.max_samples_per_tree = d;
+    }
     let s = Instant::now();
     let (forest, stats) = Forest::train(&train, classes.len(), &params).unwrap();
     let ours_train_s = s.elapsed().as_secs_f64();

@@ -43,11 +43,11 @@ impl Default for ForestParams {
     fn default() -> Self {
         Self {
             trees: 20,
-            max_depth: 16,
-            min_samples_leaf: 2,
+            max_depth: 20,
+            min_samples_leaf: 1,
             features_per_split: 0,
             bootstrap: true,
-            max_samples_per_tree: 40_000,
+            max_samples_per_tree: 0,
             criterion: Criterion::Gini,
             balance_classes: false,
             seed: 0x00F0_4E57,
