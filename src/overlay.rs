@@ -3,7 +3,9 @@
 //! the README's ground-truth picture and for exported overlay PNGs; the app draws its live
 //! overlay on the GPU with the same colours.
 
+use crate::fit::tracker::TrackedFrame;
 use crate::plane::{LabelImage, Mask};
+use crate::scene::Scene;
 use crate::scene::{SEED_BACKGROUND, SEED_NONE};
 use image::{Rgb, RgbImage};
 
@@ -122,4 +124,19 @@ pub fn tile(images: &[RgbImage], columns: usize) -> RgbImage {
         image::imageops::overlay(&mut out, img, cx as i64, cy as i64);
     }
     out
+}
+
+/// A tracked frame over camera `c`'s image: visible structures filled and outlined, hidden
+/// ones dashed, each in its scene colour (what the app's export writes).
+pub fn draw_tracked(img: &mut RgbImage, scene: &Scene, f: &TrackedFrame, c: usize) {
+    let index = |l: u8| scene.structures.iter().position(|s| s.label == l);
+    if let Some(labels) = f.labels.get(c) {
+        draw_labels(img, labels, &index, 0.3);
+    }
+    for (name, masks) in &f.hidden {
+        let i = scene.structures.iter().position(|s| &s.name == name);
+        if let (Some(i), Some(mask)) = (i, masks.get(c)) {
+            draw_hidden(img, mask, i);
+        }
+    }
 }

@@ -100,18 +100,87 @@ pub fn run(
     let start = initial_state(scene, &model, affine);
     let options = TrackOptions::new(mode, frames, scene.cameras[0].width);
     let total = frames.1 + 1 - frames.0;
-    let anchor_name = model.structures[model.anchor].name.clone();
-    let mut trajectory = Trajectory::default();
-    let mut per_frame_dice = Vec::new();
-    let mut by_structure: BTreeMap<String, Vec<f64>> = BTreeMap::new();
-    let mut all_dice = Vec::new();
-    let mut hidden_dice: BTreeMap<String, Vec<f64>> = BTreeMap::new();
-    let mut centroid_err: BTreeMap<String, Vec<f64>> = BTreeMap::new();
-    let (mut fx_err, mut cx_err) = (Vec::new(), Vec::new());
-    let mut ms = Vec::new();
-    let mut lost_frames = 0;
-    let gt_traj = scene.ground_truth.trajectory.as_ref();
-    let mut on_frame = |f: TrackedFrame| -> Result<(), Error> {
+    let mut recorder = Recorder::new(scene, out, mode);
+    track(scene, &appearance, start, &options, cancel, &mut |f| {
+        recorder.record(&f)?;
+        progress(recorder.frames(), total);
+        Ok(())
+    })?;
+    recorder.finish(appearance.stats.train_s)
+}
+
+/// Dice of each visible structure in frame `f` against ground truth, per camera (structures
+/// where truth and prediction are both empty are left out). Empty without ground truth.
+pub fn frame_dice(scene: &Scene, f: &TrackedFrame) -> Result<Vec<(String, f64)>, Error> {
+    let mut scores = Vec::new();
+    for c in 0..scene.cameras.len() {
+        if let Some(gt) = scene.ground_truth_labels(c, f.frame) {
+            let gt = gt?;
+            let Some(labels) = f.labels.get(c) else {
+                continue;
+            };
+            for s in scene.structures.iter().filter(|s| s.visible) {
+                if let Some(d) = dice(&labels.mask_of(s.label), &gt.mask_of(s.label)) {
+                    scores.push((s.name.clone(), d));
+                }
+            }
+        }
+    }
+    Ok(scores)
+}
+
+/// Writes what `track` writes, frame by frame, and gathers the metrics (CONTRACT §3). The
+/// command and the app's export both go through it, so their files are the same.
+pub struct Recorder<'a> {
+    scene: &'a Scene,
+    out: &'a Path,
+    mode: Mode,
+    anchor_name: String,
+    trajectory: Trajectory,
+    per_frame_dice: Vec<f64>,
+    by_structure: BTreeMap<String, Vec<f64>>,
+    all_dice: Vec<f64>,
+    hidden_dice: BTreeMap<String, Vec<f64>>,
+    centroid_err: BTreeMap<String, Vec<f64>>,
+    fx_err: Vec<f64>,
+    cx_err: Vec<f64>,
+    ms: Vec<f64>,
+    lost_frames: usize,
+    /// Also write overlay PNGs (`overlay/{camera}/{frame}.png`), as the app's export does.
+    pub overlays: bool,
+}
+
+impl<'a> Recorder<'a> {
+    pub fn new(scene: &'a Scene, out: &'a Path, mode: Mode) -> Self {
+        let model_anchor = crate::fit::model::anchor_index(&scene.structures);
+        Self {
+            scene,
+            out,
+            mode,
+            anchor_name: scene.structures[model_anchor].name.clone(),
+            trajectory: Trajectory::default(),
+            per_frame_dice: Vec::new(),
+            by_structure: BTreeMap::new(),
+            all_dice: Vec::new(),
+            hidden_dice: BTreeMap::new(),
+            centroid_err: BTreeMap::new(),
+            fx_err: Vec::new(),
+            cx_err: Vec::new(),
+            ms: Vec::new(),
+            lost_frames: 0,
+            overlays: false,
+        }
+    }
+
+    /// Frames recorded so far.
+    pub fn frames(&self) -> usize {
+        self.trajectory.frames.len()
+    }
+
+    /// Writes one frame's masks (and overlays) and adds it to the metrics.
+    pub fn record(&mut self, f: &TrackedFrame) -> Result<(), Error> {
+        let scene = self.scene;
+        let out = self.out;
         let t = f.frame;
         for (c, cam) in scene.cameras.iter().enumerate() {
             write_labels(
@@ -124,19 +193,20 @@ pub fn run(
                     &masks[c].map(|&b| if b { 255 } else { 0 }),
                 )?;
             }
-        }
-        // Dice per camera and visible structure where truth or prediction is non-empty.
-        let mut frame_scores = Vec::new();
-        for (c, cam) in scene.cameras.iter().enumerate() {
-            if let Some(gt) = scene.ground_truth_labels(c, t) {
-                let gt = gt?;
-                for s in scene.structures.iter().filter(|s| s.visible) {
-                    if let Some(d) = dice(&f.labels[c].mask_of(s.label), &gt.mask_of(s.label)) {
-                        frame_scores.push(d);
-                        by_structure.entry(s.name.clone()).or_default().push(d);
-                    }
-                }
+            if self.overlays {
+                let mut img = (*scene.frame(c, t)?).clone();
+                crate::overlay::draw_tracked(&mut img, scene, f, c);
+                crate::scene::write::write_rgb(
+                    &out.join(format!("overlay/{}/{t:06}.png", cam.name)),
+                    &img,
+                )?;
             }
+        }
+        let frame_scores = frame_dice(scene, f)?;
+        for (name, d) in &frame_scores {
+            self.by_structure.entry(name.clone()).or_default().push(*d);
+        }
+        for (c, cam) in scene.cameras.iter().enumerate() {
             for (name, masks) in &f.hidden {
                 let path = match (&scene.ground_truth.hidden, &scene.root) {
                     (Some(tpl), Some(root)) => root.join(tpl.expand(t, &cam.name, name)),
@@ -155,35 +225,36 @@ pub fn run(
                         .into());
                     }
                     if let Some(d) = dice(&masks[c], &gt.map(|&v| v >= 128)) {
-                        hidden_dice.entry(name.clone()).or_default().push(d);
+                        self.hidden_dice.entry(name.clone()).or_default().push(d);
                     }
                 }
             }
         }
         if !frame_scores.is_empty() {
-            per_frame_dice.push(mean(&frame_scores));
-            all_dice.extend(frame_scores);
+            let values: Vec<f64> = frame_scores.iter().map(|(_, d)| *d).collect();
+            self.per_frame_dice.push(mean(&values));
+            self.all_dice.extend(values);
         }
-        if let Some(truth) = gt_traj.and_then(|g| g.get(t)) {
+        if let Some(truth) = scene.ground_truth.trajectory.as_ref().and_then(|g| g.get(t)) {
             for (name, c) in &f.centroids {
                 if let Some(tc) = truth.centroids.get(name) {
-                    centroid_err
+                    self.centroid_err
                         .entry(name.clone())
                         .or_default()
                         .push((*c - glam::DVec3::from_array(*tc)).length());
                 }
             }
             for (est, tru) in f.state.intrinsics.iter().zip(&truth.cameras) {
-                fx_err.push((est.fx - tru.fx).abs() / tru.fx);
-                cx_err.push((est.cx - tru.cx).abs());
+                self.fx_err.push((est.fx - tru.fx).abs() / tru.fx);
+                self.cx_err.push((est.cx - tru.cx).abs());
             }
         }
-        ms.push(f.ms);
-        lost_frames += f.lost as usize;
-        trajectory.frames.push(TrajectoryFrame {
+        self.ms.push(f.ms);
+        self.lost_frames += f.lost as usize;
+        self.trajectory.frames.push(TrajectoryFrame {
             frame: t as u32,
             affine: f.state.affine.q.to_vec(),
-            shape: BTreeMap::from([(anchor_name.clone(), f.state.shape.clone())]),
+            shape: BTreeMap::from([(self.anchor_name.clone(), f.state.shape.clone())]),
             cameras: f.state.intrinsics.clone(),
             centroids: f
                 .centroids
@@ -196,56 +267,61 @@ pub fn run(
             confidence: Some(f.confidence),
             lost: Some(f.lost),
         });
-        progress(trajectory.frames.len(), total);
         Ok(())
-    };
-    track(scene, &appearance, start, &options, cancel, &mut on_frame)?;
-    write_json_atomic(&out.join("trajectory.json"), &trajectory)?;
-    let hidden: BTreeMap<String, HiddenMetrics> = centroid_err
-        .iter()
-        .filter(|(name, _)| {
-            scene
-                .structures
-                .iter()
-                .any(|s| &s.name == *name && !s.visible)
-        })
-        .map(|(name, errs)| {
-            (
-                name.clone(),
-                HiddenMetrics {
-                    dice_mean: hidden_dice.get(name).map(|v| mean(v)),
-                    centroid_error_mm_mean: mean(errs),
-                    centroid_error_mm_max: errs.iter().cloned().fold(0.0, f64::max),
+    }
+
+    /// Writes trajectory.json and metrics.json; `forest_train_s` is the forest's training time.
+    pub fn finish(self, forest_train_s: f64) -> Result<TrackMetrics, Error> {
+        let scene = self.scene;
+        write_json_atomic(&self.out.join("trajectory.json"), &self.trajectory)?;
+        let hidden: BTreeMap<String, HiddenMetrics> = self
+            .centroid_err
+            .iter()
+            .filter(|(name, _)| {
+                scene
+                    .structures
+                    .iter()
+                    .any(|s| &s.name == *name && !s.visible)
+            })
+            .map(|(name, errs)| {
+                (
+                    name.clone(),
+                    HiddenMetrics {
+                        dice_mean: self.hidden_dice.get(name).map(|v| mean(v)),
+                        centroid_error_mm_mean: mean(errs),
+                        centroid_error_mm_max: errs.iter().cloned().fold(0.0, f64::max),
+                    },
+                )
+            })
+            .collect();
+        let metrics = TrackMetrics {
+            mode: self.mode.name().into(),
+            frames: self.trajectory.frames.len(),
+            lost_frames: self.lost_frames,
+            dice: (!self.all_dice.is_empty()).then(|| DiceSummary {
+                mean: mean(&self.all_dice),
+                by_structure: self
+                    .by_structure
+                    .iter()
+                    .map(|(k, v)| (k.clone(), mean(v)))
+                    .collect(),
+                per_frame: self.per_frame_dice.clone(),
+            }),
+            hidden,
+            camera: (!self.fx_err.is_empty()).then(|| CameraMetrics {
+                fx_rel_error_mean: mean(&self.fx_err),
+                cx_error_px_mean: mean(&self.cx_err),
+                fx_rel_error_max: self.fx_err.iter().cloned().fold(0.0, f64::max),
+            }),
+            timing: Timing {
+                forest_train_s,
+                ms_per_frame: Percentiles {
+                    median: percentile(&self.ms, 0.5),
+                    p95: percentile(&self.ms, 0.95),
                 },
-            )
-        })
-        .collect();
-    let metrics = TrackMetrics {
-        mode: mode.name().into(),
-        frames: total,
-        lost_frames,
-        dice: (!all_dice.is_empty()).then(|| DiceSummary {
-            mean: mean(&all_dice),
-            by_structure: by_structure
-                .iter()
-                .map(|(k, v)| (k.clone(), mean(v)))
-                .collect(),
-            per_frame: per_frame_dice.clone(),
-        }),
-        hidden,
-        camera: (!fx_err.is_empty()).then(|| CameraMetrics {
-            fx_rel_error_mean: mean(&fx_err),
-            cx_error_px_mean: mean(&cx_err),
-            fx_rel_error_max: fx_err.iter().cloned().fold(0.0, f64::max),
-        }),
-        timing: Timing {
-            forest_train_s: appearance.stats.train_s,
-            ms_per_frame: Percentiles {
-                median: percentile(&ms, 0.5),
-                p95: percentile(&ms, 0.95),
             },
-        },
-    };
-    write_json_atomic(&out.join("metrics.json"), &metrics)?;
-    Ok(metrics)
+        };
+        write_json_atomic(&self.out.join("metrics.json"), &metrics)?;
+        Ok(metrics)
+    }
 }

@@ -4,13 +4,13 @@
 //! frames and between Gauss–Newton steps; a panic inside a job becomes an error event and the
 //! worker keeps serving.
 
-use crate::appearance::{Appearance, ForestParams, TrainStats};
+use crate::appearance::{Appearance, ForestParams, ProbabilityMaps};
 use crate::error::Error;
 use crate::fit::Model;
 use crate::fit::optimizer::Mode;
 use crate::fit::tracker::{TrackOptions, TrackedFrame, initial_state, track};
 use crate::geometry::Affine;
-use crate::scene::{FrameCheck, Scene};
+use crate::scene::{FrameCheck, Scene, Seeds};
 use crossbeam_channel::{Receiver, Sender, unbounded};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -22,7 +22,15 @@ pub enum Command {
     LoadScene(String),
     /// Use a scene the UI already holds (e.g. with freshly painted seeds).
     UseScene(Arc<Scene>),
+    /// Replace the seeds of the scene in use (the app's painted strokes).
+    SetSeeds(Seeds),
+    /// Use a forest the UI already holds (a loaded session).
+    SetAppearance(Arc<Appearance>),
     Train(ForestParams),
+    /// Per-class probabilities of one frame in every view.
+    Classify {
+        frame: usize,
+    },
     /// Automatic initial pose on a frame.
     Initialise {
         frame: usize,
@@ -43,6 +51,7 @@ pub enum Command {
 pub enum Task {
     Load,
     Train,
+    Classify,
     Initialise,
     Track,
     Job,
@@ -51,7 +60,12 @@ pub enum Task {
 /// What the worker tells the UI.
 pub enum Event {
     SceneLoaded(Arc<Scene>),
-    Trained(TrainStats),
+    Trained(Arc<Appearance>),
+    /// Probabilities of `frame`, one map per camera.
+    Probabilities {
+        frame: usize,
+        maps: Arc<Vec<ProbabilityMaps>>,
+    },
     Initialised(Affine),
     Progress {
         task: Task,
@@ -59,6 +73,11 @@ pub enum Event {
         total: usize,
     },
     Frame(Box<TrackedFrame>),
+    /// Dice per visible structure and camera of a tracked frame, where ground truth exists.
+    Dice {
+        frame: usize,
+        dice: Vec<(String, f64)>,
+    },
     Finished(Task),
     Cancelled(Task),
     /// One line for the user; the worker keeps running.
@@ -82,7 +101,7 @@ pub struct Worker {
 
 struct State {
     scene: Option<Arc<Scene>>,
-    appearance: Option<Appearance>,
+    appearance: Option<Arc<Appearance>>,
 }
 
 impl Worker {
@@ -181,8 +200,9 @@ impl Drop for Worker {
 
 fn task_of(c: &Command) -> Task {
     match c {
-        Command::LoadScene(_) | Command::UseScene(_) => Task::Load,
-        Command::Train(_) => Task::Train,
+        Command::LoadScene(_) | Command::UseScene(_) | Command::SetSeeds(_) => Task::Load,
+        Command::Train(_) | Command::SetAppearance(_) => Task::Train,
+        Command::Classify { .. } => Task::Classify,
         Command::Initialise { .. } => Task::Initialise,
         Command::Track { .. } => Task::Track,
         Command::Run(_) | Command::Shutdown => Task::Job,
@@ -196,10 +216,10 @@ fn need_scene(state: &State) -> Result<Arc<Scene>, Error> {
         .ok_or_else(|| crate::error::input_err("scene", "no scene is loaded"))
 }
 
-fn need_appearance(state: &State) -> Result<&Appearance, Error> {
+fn need_appearance(state: &State) -> Result<Arc<Appearance>, Error> {
     state
         .appearance
-        .as_ref()
+        .clone()
         .ok_or_else(|| crate::error::input_err("seeds", "train the forest first"))
 }
 
@@ -220,11 +240,31 @@ fn run(
             state.scene = Some(scene);
             state.appearance = None;
         }
+        Command::SetSeeds(seeds) => {
+            let scene = need_scene(state)?;
+            state.scene = Some(Arc::new(scene.with_seeds(seeds)));
+        }
+        Command::SetAppearance(a) => state.appearance = Some(a),
         Command::Train(params) => {
             let scene = need_scene(state)?;
-            let model = Appearance::train(&scene, &params, Some(cancel))?;
-            let _ = out.send(Event::Trained(model.stats.clone()));
+            let model = Arc::new(Appearance::train(&scene, &params, Some(cancel))?);
+            let _ = out.send(Event::Trained(model.clone()));
             state.appearance = Some(model);
+        }
+        Command::Classify { frame } => {
+            let scene = need_scene(state)?;
+            let appearance = need_appearance(state)?;
+            let mut maps = Vec::new();
+            for c in 0..scene.cameras.len() {
+                if cancel.load(Ordering::SeqCst) {
+                    return Err(Error::Cancelled);
+                }
+                maps.push(appearance.classify_frame(&*scene.frame(c, frame)?));
+            }
+            let _ = out.send(Event::Probabilities {
+                frame,
+                maps: Arc::new(maps),
+            });
         }
         Command::Initialise { frame } => {
             let scene = need_scene(state)?;
@@ -232,7 +272,7 @@ fn run(
             let affine = crate::fit::init::automatic_pose(
                 &scene,
                 &Model::from_scene(&scene),
-                appearance,
+                &appearance,
                 frame,
             )?;
             let _ = out.send(Event::Initialised(affine));
@@ -258,7 +298,7 @@ fn run(
             let model = Model::from_scene(&scene);
             let affine = match start.or(scene.initial_pose) {
                 Some(a) => a,
-                None => crate::fit::init::automatic_pose(&scene, &model, appearance, frames.0)?,
+                None => crate::fit::init::automatic_pose(&scene, &model, &appearance, frames.0)?,
             };
             let options = TrackOptions::new(mode, frames, scene.cameras[0].width)
                 .with_cancel(Some(cancel.clone()));
@@ -266,7 +306,7 @@ fn run(
             let mut done = 0;
             track(
                 &scene,
-                appearance,
+                &appearance,
                 initial_state(&scene, &model, affine),
                 &options,
                 Some(cancel),
@@ -277,7 +317,12 @@ fn run(
                         done,
                         total,
                     });
+                    let dice = crate::track::frame_dice(&scene, &f)?;
+                    let frame = f.frame;
                     let _ = out.send(Event::Frame(Box::new(f)));
+                    if !dice.is_empty() {
+                        let _ = out.send(Event::Dice { frame, dice });
+                    }
                     Ok(())
                 },
             )?;
@@ -348,7 +393,7 @@ mod tests {
         let ev = until(&worker, |e| matches!(e, Event::Finished(Task::Train)));
         assert!(
             ev.iter()
-                .any(|e| matches!(e, Event::Trained(s) if s.samples > 100))
+                .any(|e| matches!(e, Event::Trained(a) if a.stats.samples > 100))
         );
         worker.send(Command::Track {
             mode: Mode::LS,

@@ -54,14 +54,7 @@ impl Model {
                 part: i,
             })
             .collect();
-        let anchor = scene
-            .structures
-            .iter()
-            .enumerate()
-            .filter(|(_, s)| s.visible)
-            .max_by_key(|(_, s)| s.mesh.vertices.len())
-            .map(|(i, _)| i)
-            .unwrap_or(0);
+        let anchor = anchor_index(&scene.structures);
         Self {
             structures,
             shape: scene.shape.clone(),
@@ -131,4 +124,16 @@ fn edges(mesh: &Mesh) -> Vec<Edge> {
         }
     }
     out
+}
+
+/// The structure whose shape weights name the joint model in outputs: the visible one with
+/// the most vertices (the organ).
+pub fn anchor_index(structures: &[crate::scene::Structure]) -> usize {
+    structures
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| s.visible)
+        .max_by_key(|(_, s)| s.mesh.vertices.len())
+        .map(|(i, _)| i)
+        .unwrap_or(0)
 }

@@ -106,7 +106,8 @@ pub struct Scene {
     pub ground_truth: GroundTruth,
     /// Inclusive frame ranges where the zoom changes.
     pub zoom_changes: Vec<(usize, usize)>,
-    cache: FrameCache,
+    /// Shared with copies made by [`Scene::with_seeds`].
+    cache: Arc<FrameCache>,
 }
 
 /// How much `Scene::open` checks of the frames.
@@ -268,7 +269,7 @@ impl Scene {
             seeds_template: None,
             ground_truth: GroundTruth::default(),
             zoom_changes,
-            cache: FrameCache::new(frames::DEFAULT_CACHE_FRAMES),
+            cache: Arc::new(FrameCache::new(frames::DEFAULT_CACHE_FRAMES)),
         };
         scene.check_frames(check)?;
         if let Some(t) = &file.seeds {
@@ -314,8 +315,29 @@ impl Scene {
             seeds_template: None,
             ground_truth,
             zoom_changes,
-            cache: FrameCache::new(1),
+            cache: Arc::new(FrameCache::new(1)),
         })
+    }
+
+    /// The same scene with other seeds (the app's painted strokes); frames and their cache
+    /// are shared, nothing is read again.
+    pub fn with_seeds(&self, seeds: Seeds) -> Scene {
+        Scene {
+            root: self.root.clone(),
+            origin: self.origin.clone(),
+            fps: self.fps,
+            frame_count: self.frame_count,
+            cameras: self.cameras.clone(),
+            frame_sources: self.frame_sources.clone(),
+            structures: self.structures.clone(),
+            shape: self.shape.clone(),
+            initial_pose: self.initial_pose,
+            seeds,
+            seeds_template: self.seeds_template.clone(),
+            ground_truth: self.ground_truth.clone(),
+            zoom_changes: self.zoom_changes.clone(),
+            cache: self.cache.clone(),
+        }
     }
 
     /// Frame `t` of camera `c`, decoded (cached).
