@@ -2,6 +2,7 @@
 //! multi-structure segmentation and non-rigid pose estimation). Knows nothing of the GUI; the
 //! app and the CLI are two faces over these functions.
 
+pub mod app;
 pub mod appearance;
 pub mod classify;
 pub mod error;

@@ -22,6 +22,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Open the desktop app on a scene (default: the built-in demo).
+    Open { scene: Option<String> },
     /// Validate a scene and print what it holds (SCENE: folder, scene.json, or `demo`).
     Info {
         scene: String,
@@ -110,14 +112,14 @@ fn main() -> ExitCode {
 
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
-        None => {
-            // The desktop app arrives with its issue; until then say what the binary offers.
-            use clap::CommandFactory;
-            Cli::command().print_help()?;
-            println!(
-                "\n\nThe desktop app is not part of this build yet; the commands above work headless."
-            );
-            Ok(())
+        None => endofuse::app::run_native("demo"),
+        Some(Command::Open { scene }) => {
+            let scene = scene.unwrap_or_else(|| "demo".into());
+            if scene != "demo" {
+                // A scene that does not load is bad input: say so before opening a window.
+                Scene::open(&scene, FrameCheck::Headers)?;
+            }
+            endofuse::app::run_native(&scene)
         }
         Some(Command::Info { scene, quick }) => {
             let check = if quick {

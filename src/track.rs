@@ -235,7 +235,12 @@ impl<'a> Recorder<'a> {
             self.per_frame_dice.push(mean(&values));
             self.all_dice.extend(values);
         }
-        if let Some(truth) = scene.ground_truth.trajectory.as_ref().and_then(|g| g.get(t)) {
+        if let Some(truth) = scene
+            .ground_truth
+            .trajectory
+            .as_ref()
+            .and_then(|g| g.get(t))
+        {
             for (name, c) in &f.centroids {
                 if let Some(tc) = truth.centroids.get(name) {
                     self.centroid_err

@@ -18,7 +18,7 @@ use crate::render::raster::{RasterOptions, rasterize};
 use glam::{DVec2, DVec3};
 
 /// Pose, shape and camera parameters of one frame.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct FitState {
     pub affine: Affine,
     /// Joint shape weights (mm along unit modes).

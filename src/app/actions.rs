@@ -1,0 +1,186 @@
+//! Every user action of the app, defined once: its label (menus, buttons, tooltips) and its
+//! keyboard shortcut. Menus, buttons and the key handler all read this table, so a shortcut
+//! shown is always the shortcut that works.
+
+use egui::{Key, KeyboardShortcut, Modifiers};
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Action {
+    OpenScene,
+    OpenDemo,
+    SaveSession,
+    LoadSession,
+    SaveSeeds,
+    Export,
+    Brush,
+    Eraser,
+    Place,
+    BrushSmaller,
+    BrushBigger,
+    Undo,
+    Redo,
+    Train,
+    ShowImage,
+    ShowProbability,
+    ShowUncertainty,
+    Initialise,
+    FitFrame,
+    Track,
+    Cancel,
+    PlayPause,
+    StepBack,
+    StepForward,
+    FirstFrame,
+    LastFrame,
+    ResetView,
+    Review,
+}
+
+const fn key(k: Key) -> Option<KeyboardShortcut> {
+    Some(KeyboardShortcut::new(Modifiers::NONE, k))
+}
+
+const fn cmd(k: Key) -> Option<KeyboardShortcut> {
+    Some(KeyboardShortcut::new(Modifiers::COMMAND, k))
+}
+
+impl Action {
+    /// In the order the key handler tries them (Redo before Undo: Ctrl+Shift+Z contains Ctrl+Z).
+    pub const ALL: [Action; 28] = [
+        Action::OpenScene,
+        Action::OpenDemo,
+        Action::SaveSession,
+        Action::LoadSession,
+        Action::SaveSeeds,
+        Action::Export,
+        Action::Brush,
+        Action::Eraser,
+        Action::Place,
+        Action::BrushSmaller,
+        Action::BrushBigger,
+        Action::Redo,
+        Action::Undo,
+        Action::Train,
+        Action::ShowImage,
+        Action::ShowProbability,
+        Action::ShowUncertainty,
+        Action::Initialise,
+        Action::FitFrame,
+        Action::Track,
+        Action::Cancel,
+        Action::PlayPause,
+        Action::StepBack,
+        Action::StepForward,
+        Action::FirstFrame,
+        Action::LastFrame,
+        Action::ResetView,
+        Action::Review,
+    ];
+
+    pub fn label(self) -> &'static str {
+        match self {
+            Action::OpenScene => "Open scene…",
+            Action::OpenDemo => "Open the demo",
+            Action::SaveSession => "Save session…",
+            Action::LoadSession => "Load session…",
+            Action::SaveSeeds => "Save seeds as label PNGs…",
+            Action::Export => "Export masks, overlays and trajectory…",
+            Action::Brush => "Brush",
+            Action::Eraser => "Eraser",
+            Action::Place => "Place model",
+            Action::BrushSmaller => "Smaller brush",
+            Action::BrushBigger => "Bigger brush",
+            Action::Undo => "Undo stroke",
+            Action::Redo => "Redo stroke",
+            Action::Train => "Train forest",
+            Action::ShowImage => "Image",
+            Action::ShowProbability => "Probability",
+            Action::ShowUncertainty => "Uncertainty",
+            Action::Initialise => "Place automatically",
+            Action::FitFrame => "Fit this frame",
+            Action::Track => "Track",
+            Action::Cancel => "Cancel",
+            Action::PlayPause => "Play / pause",
+            Action::StepBack => "Previous frame",
+            Action::StepForward => "Next frame",
+            Action::FirstFrame => "First frame",
+            Action::LastFrame => "Last frame",
+            Action::ResetView => "Fit views to window",
+            Action::Review => "Review plots",
+        }
+    }
+
+    pub fn shortcut(self) -> Option<KeyboardShortcut> {
+        match self {
+            Action::OpenScene => cmd(Key::O),
+            Action::SaveSession => cmd(Key::S),
+            Action::LoadSession => cmd(Key::L),
+            Action::Export => cmd(Key::E),
+            Action::Brush => key(Key::B),
+            Action::Eraser => key(Key::E),
+            Action::Place => key(Key::M),
+            Action::BrushSmaller => key(Key::OpenBracket),
+            Action::BrushBigger => key(Key::CloseBracket),
+            Action::Undo => cmd(Key::Z),
+            Action::Redo => Some(KeyboardShortcut::new(
+                Modifiers::COMMAND.plus(Modifiers::SHIFT),
+                Key::Z,
+            )),
+            Action::Train => key(Key::T),
+            Action::ShowImage => key(Key::I),
+            Action::ShowProbability => key(Key::P),
+            Action::ShowUncertainty => key(Key::U),
+            Action::FitFrame => key(Key::F),
+            Action::Track => cmd(Key::T),
+            Action::Cancel => key(Key::Escape),
+            Action::PlayPause => key(Key::Space),
+            Action::StepBack => key(Key::ArrowLeft),
+            Action::StepForward => key(Key::ArrowRight),
+            Action::FirstFrame => key(Key::Home),
+            Action::LastFrame => key(Key::End),
+            Action::ResetView => key(Key::R),
+            Action::OpenDemo | Action::SaveSeeds | Action::Initialise | Action::Review => None,
+        }
+    }
+
+    /// "Label (shortcut)" for tooltips.
+    pub fn hint(self, ctx: &egui::Context) -> String {
+        match self.shortcut() {
+            Some(s) => format!("{} ({})", self.label(), ctx.format_shortcut(&s)),
+            None => self.label().to_string(),
+        }
+    }
+}
+
+/// Number keys pick the seed class: 1 = background/tools, 2… the visible structures.
+pub const CLASS_KEYS: [Key; 9] = [
+    Key::Num1,
+    Key::Num2,
+    Key::Num3,
+    Key::Num4,
+    Key::Num5,
+    Key::Num6,
+    Key::Num7,
+    Key::Num8,
+    Key::Num9,
+];
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn no_two_actions_share_a_shortcut() {
+        let mut seen = Vec::new();
+        for a in Action::ALL {
+            if let Some(s) = a.shortcut() {
+                assert!(!seen.contains(&s), "{a:?} repeats a shortcut");
+                seen.push(s);
+            }
+        }
+        // Every action is listed once.
+        for (i, a) in Action::ALL.iter().enumerate() {
+            assert!(!Action::ALL[i + 1..].contains(a), "{a:?} listed twice");
+        }
+    }
+}

@@ -1,0 +1,250 @@
+//! The session file (`endofuse-session/1`, JSON): which scene, the painted seeds, the fit
+//! settings, the placed pose, the trained forest and the tracking results. Written atomically
+//! (temporary file, then rename), both when the user saves and by the autosave, so a crash
+//! loses at most the strokes since the last autosave and never leaves half a file.
+
+use crate::appearance::Appearance;
+use crate::error::{Error, InputError};
+use crate::fit::energy::FitState;
+use crate::geometry::Affine;
+use crate::plane::Plane;
+use crate::scene::Seeds;
+use crate::scene::write::write_json_atomic;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+pub const SESSION_FORMAT: &str = "endofuse-session/1";
+
+/// Fit settings the side panel edits.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct FitSettings {
+    /// R, L, LS or LSC.
+    pub mode: String,
+    /// Let LSC correct the cameras inside zoom changes (off: LSC behaves as LS).
+    pub camera_correction: bool,
+    pub trees: usize,
+    /// Retrain shortly after the strokes change.
+    pub live_update: bool,
+}
+
+impl Default for FitSettings {
+    fn default() -> Self {
+        Self {
+            mode: "LS".into(),
+            camera_correction: true,
+            trees: 20,
+            live_update: false,
+        }
+    }
+}
+
+/// One tracked frame as the session keeps it (labels are re-rendered from the state).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FrameResult {
+    pub frame: usize,
+    pub state: FitState,
+    pub energy: f64,
+    pub confidence: f64,
+    pub lost: bool,
+    pub ms: f64,
+    /// Dice per visible structure and camera against ground truth, when it exists.
+    #[serde(default)]
+    pub dice: Vec<(String, f64)>,
+}
+
+/// One painted view and frame, run-length coded: (run length, seed value).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SeedLayer {
+    pub camera: usize,
+    pub frame: usize,
+    pub width: usize,
+    pub height: usize,
+    pub runs: Vec<(u32, u8)>,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Session {
+    pub format: String,
+    /// The scene as opened: a folder, a scene.json, or "demo".
+    pub scene: String,
+    pub seeds: Vec<SeedLayer>,
+    #[serde(default)]
+    pub settings: FitSettings,
+    #[serde(default)]
+    pub placement: Option<Affine>,
+    #[serde(default)]
+    pub forest: Option<Appearance>,
+    #[serde(default)]
+    pub results: Vec<FrameResult>,
+}
+
+pub fn encode_seeds(seeds: &Seeds) -> Vec<SeedLayer> {
+    let mut out = Vec::new();
+    for (camera, frames) in seeds.by_camera.iter().enumerate() {
+        for (&frame, img) in frames {
+            let mut runs: Vec<(u32, u8)> = Vec::new();
+            for &v in &img.data {
+                match runs.last_mut() {
+                    Some((n, last)) if *last == v => *n += 1,
+                    _ => runs.push((1, v)),
+                }
+            }
+            out.push(SeedLayer {
+                camera,
+                frame,
+                width: img.width,
+                height: img.height,
+                runs,
+            });
+        }
+    }
+    out
+}
+
+/// Decodes seed layers for cameras of `sizes`; a layer of the wrong size or length is an
+/// error naming `origin`.
+pub fn decode_seeds(
+    layers: &[SeedLayer],
+    sizes: &[(usize, usize)],
+    origin: &Path,
+) -> Result<Seeds, InputError> {
+    let mut by_camera = vec![BTreeMap::new(); sizes.len()];
+    for l in layers {
+        let Some(&(w, h)) = sizes.get(l.camera) else {
+            return Err(InputError::new(
+                origin,
+                format!(
+                    "seeds name camera {}, the scene has {}",
+                    l.camera,
+                    sizes.len()
+                ),
+            ));
+        };
+        if (l.width, l.height) != (w, h) {
+            return Err(InputError::new(
+                origin,
+                format!(
+                    "seeds of camera {} frame {} are {}×{}, the camera is {w}×{h}",
+                    l.camera, l.frame, l.width, l.height
+                ),
+            ));
+        }
+        let mut data = Vec::with_capacity(w * h);
+        for &(n, v) in &l.runs {
+            if data.len() + n as usize > w * h {
+                break;
+            }
+            data.extend(std::iter::repeat_n(v, n as usize));
+        }
+        if data.len() != w * h {
+            return Err(InputError::new(
+                origin,
+                format!(
+                    "seeds of camera {} frame {} hold {} pixels, not {}",
+                    l.camera,
+                    l.frame,
+                    data.len(),
+                    w * h
+                ),
+            ));
+        }
+        by_camera[l.camera].insert(l.frame, Plane::from_vec(w, h, data).expect("sized above"));
+    }
+    Ok(Seeds { by_camera })
+}
+
+impl Session {
+    pub fn save(&self, path: &Path) -> Result<(), Error> {
+        write_json_atomic(path, self)
+    }
+
+    /// Reads and checks a session file.
+    pub fn load(path: &Path) -> Result<Session, InputError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| InputError::new(path, format!("cannot read: {e}")))?;
+        let session: Session = serde_json::from_str(&text)
+            .map_err(|e| InputError::new(path, format!("not a session file: {e}")))?;
+        if session.format != SESSION_FORMAT {
+            return Err(InputError::new(
+                path,
+                format!(
+                    "format is \"{}\", this version reads \"{SESSION_FORMAT}\"",
+                    session.format
+                ),
+            ));
+        }
+        Ok(session)
+    }
+}
+
+/// Where the autosave of a scene lives: the app's data folder (or the temporary folder), one
+/// file per scene.
+pub fn autosave_path(scene: &str) -> PathBuf {
+    let dir = eframe::storage_dir("endofuse").unwrap_or_else(std::env::temp_dir);
+    let mut hash: u64 = 0xcbf2_9ce4_8422_2325;
+    for b in scene.bytes() {
+        hash = (hash ^ b as u64).wrapping_mul(0x0100_0000_01b3);
+    }
+    dir.join(format!("autosave-{hash:016x}.json"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn seeds_round_trip_and_bad_layers_are_refused() {
+        let mut img = Plane::filled(7, 5, 0u8);
+        img.data[3] = 255;
+        img.data[10..14].fill(1);
+        let seeds = Seeds {
+            by_camera: vec![BTreeMap::from([(2, img)]), BTreeMap::new()],
+        };
+        let layers = encode_seeds(&seeds);
+        assert_eq!(layers.len(), 1);
+        let back = decode_seeds(&layers, &[(7, 5), (7, 5)], Path::new("s.json")).unwrap();
+        assert_eq!(back, seeds);
+        let e = decode_seeds(&layers, &[(8, 5), (8, 5)], Path::new("s.json")).unwrap_err();
+        assert!(
+            e.to_string().contains("s.json") && e.to_string().contains("7×5"),
+            "{e}"
+        );
+        let mut short = layers.clone();
+        short[0].runs.pop();
+        assert!(decode_seeds(&short, &[(7, 5)], Path::new("s.json")).is_err());
+    }
+
+    #[test]
+    fn sessions_save_atomically_and_refuse_other_formats() {
+        let dir = std::env::temp_dir().join(format!("endofuse-session-{}", std::process::id()));
+        let path = dir.join("a.endofuse.json");
+        let s = Session {
+            format: SESSION_FORMAT.into(),
+            scene: "demo".into(),
+            seeds: Vec::new(),
+            settings: FitSettings::default(),
+            placement: None,
+            forest: None,
+            results: Vec::new(),
+        };
+        s.save(&path).unwrap();
+        assert!(!path.with_extension("json.tmp").exists());
+        assert_eq!(Session::load(&path).unwrap(), s);
+        std::fs::write(
+            &path,
+            "{\"format\": \"other/9\", \"scene\": \"demo\", \"seeds\": []}",
+        )
+        .unwrap();
+        assert!(
+            Session::load(&path)
+                .unwrap_err()
+                .to_string()
+                .contains("other/9")
+        );
+        std::fs::write(&path, "{").unwrap();
+        assert!(Session::load(&path).is_err());
+        let _ = std::fs::remove_dir_all(dir);
+    }
+}
