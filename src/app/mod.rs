@@ -165,6 +165,8 @@ pub struct EndofuseApp {
 
     pub scene: Option<Arc<Scene>>,
     pub scene_spec: String,
+    /// The scene being loaded (it becomes `scene_spec` once it arrives).
+    loading_spec: Option<String>,
     model: Option<Arc<Model>>,
     classes: Option<ClassMap>,
     pub editor: SeedEditor,
@@ -210,6 +212,17 @@ pub struct EndofuseApp {
     allow_close: bool,
     textures: views::Textures,
     stroke: views::StrokeState,
+    /// Where the views and the timeline were drawn last frame (screen points), for tests.
+    pub layout: Layout,
+    /// Folder of autosaves (None: the app's data folder).
+    pub autosave_dir: Option<PathBuf>,
+}
+
+/// Screen rectangles of the last frame's views and timeline strip.
+#[derive(Debug, Clone, Default)]
+pub struct Layout {
+    pub views: Vec<egui::Rect>,
+    pub timeline: Option<egui::Rect>,
 }
 
 impl EndofuseApp {
@@ -233,6 +246,7 @@ impl EndofuseApp {
             gpu_overlay,
             scene: None,
             scene_spec: String::new(),
+            loading_spec: None,
             model: None,
             classes: None,
             editor: SeedEditor::default(),
@@ -269,6 +283,8 @@ impl EndofuseApp {
             allow_close: false,
             textures: views::Textures::default(),
             stroke: views::StrokeState::default(),
+            layout: Layout::default(),
+            autosave_dir: None,
         };
         app.open_scene(scene);
         app
@@ -276,7 +292,7 @@ impl EndofuseApp {
 
     /// Asks the worker to load a scene; the current one stays until the new one arrives.
     pub fn open_scene(&mut self, spec: &str) {
-        self.scene_spec = spec.to_string();
+        self.loading_spec = Some(spec.to_string());
         self.busy = Some(Busy {
             task: Task::Load,
             what: format!("Loading {spec}…"),
@@ -287,6 +303,9 @@ impl EndofuseApp {
     }
 
     fn scene_loaded(&mut self, scene: Arc<Scene>) {
+        if let Some(spec) = self.loading_spec.take() {
+            self.scene_spec = spec;
+        }
         let sizes: Vec<(usize, usize)> = scene
             .cameras
             .iter()
@@ -324,12 +343,17 @@ impl EndofuseApp {
             self.prefs.recent.insert(0, spec.clone());
             self.prefs.recent.truncate(8);
         }
-        let autosave = session::autosave_path(&spec);
+        let autosave = session::autosave_path(self.autosave_dir.as_deref(), &spec);
         self.autosave_offer = autosave.exists().then_some(autosave);
         self.scene = Some(scene);
         if let Some(p) = self.pending_session.take() {
             self.apply_session(p.session, &p.path);
         }
+    }
+
+    /// True when the probability maps of frame `t` have arrived.
+    pub fn has_probabilities(&self, t: usize) -> bool {
+        self.probabilities.contains_key(&t)
     }
 
     /// True when strokes or results changed since the last save.
@@ -418,7 +442,10 @@ impl EndofuseApp {
             Ok(()) => {
                 self.saved = (self.editor.revision, self.results.len());
                 self.notice = Some(format!("Saved {}", path.display()));
-                let _ = std::fs::remove_file(session::autosave_path(&self.scene_spec));
+                let _ = std::fs::remove_file(session::autosave_path(
+                    self.autosave_dir.as_deref(),
+                    &self.scene_spec,
+                ));
             }
             Err(e) => self.error = Some(e.to_string()),
         }
@@ -438,7 +465,7 @@ impl EndofuseApp {
         self.last_autosave_s = now_s;
         self.autosaved = state;
         let session = self.session();
-        let path = session::autosave_path(&self.scene_spec);
+        let path = session::autosave_path(self.autosave_dir.as_deref(), &self.scene_spec);
         std::thread::spawn(move || {
             let _ = session.save(&path);
         });
@@ -783,6 +810,7 @@ impl EndofuseApp {
                 }
                 if task == Task::Load {
                     self.pending_session = None;
+                    self.loading_spec = None;
                 }
                 self.error = Some(message);
             }

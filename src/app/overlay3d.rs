@@ -71,7 +71,7 @@ fn bytes<T: Copy>(v: &[T]) -> &[u8] {
 }
 
 const MESH_SHADER: &str = r#"
-struct Cam { k: vec4<f32>, dist: vec4<f32>, view: vec4<f32>, target: vec4<f32> };
+struct Cam { k: vec4<f32>, dist: vec4<f32>, view: vec4<f32>, dst: vec4<f32> };
 @group(0) @binding(0) var<uniform> cam: Cam;
 struct VOut { @builtin(position) pos: vec4<f32>, @location(0) id: f32 };
 @vertex fn vs(@location(0) p: vec3<f32>, @location(1) id: f32) -> VOut {
@@ -87,8 +87,8 @@ struct VOut { @builtin(position) pos: vec4<f32>, @location(0) id: f32 };
   let v = cam.k.y * yd + cam.k.w;
   let tx = u * cam.view.x + cam.view.y;
   let ty = v * cam.view.x + cam.view.z;
-  let depth = (p.z - cam.target.z) / (cam.target.w - cam.target.z);
-  o.pos = vec4<f32>(tx / cam.target.x * 2.0 - 1.0, 1.0 - ty / cam.target.y * 2.0, depth, 1.0);
+  let depth = (p.z - cam.dst.z) / (cam.dst.w - cam.dst.z);
+  o.pos = vec4<f32>(tx / cam.dst.x * 2.0 - 1.0, 1.0 - ty / cam.dst.y * 2.0, depth, 1.0);
   o.id = id;
   return o;
 }

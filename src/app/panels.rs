@@ -119,8 +119,8 @@ pub fn status_bar(app: &mut EndofuseApp, ui: &mut egui::Ui) {
             }
             if let Some(e) = app.error.clone() {
                 ui.separator();
-                ui.colored_label(Color32::from_rgb(255, 110, 110), format!("⚠ {e}"));
-                if ui.small_button("✕").on_hover_text("Dismiss").clicked() {
+                ui.colored_label(Color32::from_rgb(255, 110, 110), format!("Error: {e}"));
+                if ui.small_button("x").on_hover_text("Dismiss").clicked() {
                     app.error = None;
                 }
             } else if let Some(n) = app.notice.clone() {
@@ -142,6 +142,7 @@ pub fn timeline(app: &mut EndofuseApp, ui: &mut egui::Ui) {
         ui.add_space(4.0);
         let (rect, response) =
             ui.allocate_exact_size(vec2(ui.available_width(), 46.0), Sense::click_and_drag());
+        app.layout.timeline = Some(rect);
         let painter = ui.painter_at(rect);
         painter.rect_filled(rect, 3.0, Color32::from_gray(28));
         let w = rect.width() / n as f32;
@@ -210,11 +211,14 @@ pub fn timeline(app: &mut EndofuseApp, ui: &mut egui::Ui) {
         ui.horizontal(|ui| {
             let ctx = ui.ctx().clone();
             for (a, icon) in [
-                (Action::FirstFrame, "⏮"),
-                (Action::StepBack, "⏴"),
-                (Action::PlayPause, if app.playing { "⏸" } else { "▶" }),
-                (Action::StepForward, "⏵"),
-                (Action::LastFrame, "⏭"),
+                (Action::FirstFrame, "|<"),
+                (Action::StepBack, "<"),
+                (
+                    Action::PlayPause,
+                    if app.playing { "Pause" } else { "Play" },
+                ),
+                (Action::StepForward, ">"),
+                (Action::LastFrame, ">|"),
             ] {
                 if ui.button(icon).on_hover_text(a.hint(&ctx)).clicked() {
                     app.do_action(a, &ctx);

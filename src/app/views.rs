@@ -390,6 +390,7 @@ pub fn views(app: &mut EndofuseApp, ui: &mut egui::Ui) {
     );
     let transform = *app.transform.get_or_insert(ViewTransform::fit(image_size));
     let rects = grid(ui.available_rect_before_wrap(), cams, 6.0);
+    app.layout.views = rects.clone();
     let space = ctx.input(|i| i.key_down(egui::Key::Space));
     if !space {
         app.stroke.panned_with_space = false;
