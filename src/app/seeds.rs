@@ -317,7 +317,7 @@ mod tests {
                 1,
                 0,
                 (i % 40) as f32,
-                3.0,
+                3.0 + (i / 40) as f32 * 10.0,
                 1.0,
                 Dab::Paint {
                     value: SEED_BACKGROUND,
