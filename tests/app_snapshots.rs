@@ -40,11 +40,30 @@ fn step_until(h: &mut Harness<'_, EndofuseApp>, what: &str, done: impl Fn(&Endof
         h.step();
         std::thread::sleep(Duration::from_millis(20));
     }
-    // Let layout and textures settle.
-    h.run_steps(4);
+    // Let layout settle and the frames decoded on the loader thread arrive.
+    h.run_steps(2);
+    while !h.state().frames_ready() {
+        assert!(
+            Instant::now() < deadline,
+            "timed out waiting for the frames"
+        );
+        h.step();
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    h.run_steps(2);
 }
 
 fn shoot(h: &mut Harness<'_, EndofuseApp>, name: &str) {
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while !h.state().frames_ready() {
+        assert!(
+            Instant::now() < deadline,
+            "timed out waiting for the frames"
+        );
+        h.step();
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    h.run_steps(2);
     if std::env::var_os("UPDATE_SCREENSHOTS").is_some() {
         let img = h.render().expect("render");
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("screenshots/{name}.png"));

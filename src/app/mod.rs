@@ -9,6 +9,7 @@
 //! `session` (session file and autosave).
 
 pub mod actions;
+pub mod frames;
 pub mod overlay3d;
 pub mod panels;
 pub mod seeds;
@@ -216,6 +217,9 @@ pub struct EndofuseApp {
     pub layout: Layout,
     /// Folder of autosaves (None: the app's data folder).
     pub autosave_dir: Option<PathBuf>,
+    loader: frames::FrameLoader,
+    /// Folder an export is being written to.
+    exporting: Option<PathBuf>,
 }
 
 /// Screen rectangles of the last frame's views and timeline strip.
@@ -285,6 +289,8 @@ impl EndofuseApp {
             stroke: views::StrokeState::default(),
             layout: Layout::default(),
             autosave_dir: None,
+            loader: frames::FrameLoader::spawn(),
+            exporting: None,
         };
         app.open_scene(scene);
         app
@@ -349,6 +355,11 @@ impl EndofuseApp {
         if let Some(p) = self.pending_session.take() {
             self.apply_session(p.session, &p.path);
         }
+    }
+
+    /// True when every view shows the current frame (frames decode on a loader thread).
+    pub fn frames_ready(&self) -> bool {
+        views::frames_ready(self)
     }
 
     /// True when the probability maps of frame `t` have arrived.
@@ -713,7 +724,7 @@ impl EndofuseApp {
             done: 0,
             total: 0,
         });
-        self.notice = Some(format!("Exported to {}", dir.display()));
+        self.exporting = Some(dir.clone());
         self.worker.send(Command::Run(Box::new(move || {
             export_results(&scene, &model, &results, mode, &dir, train_s).map(|_| ())
         })));
@@ -788,6 +799,11 @@ impl EndofuseApp {
                 if self.busy.as_ref().is_some_and(|b| b.task == task) {
                     self.busy = None;
                 }
+                if task == Task::Job
+                    && let Some(dir) = self.exporting.take()
+                {
+                    self.notice = Some(format!("Exported the tracked frames to {}", dir.display()));
+                }
                 if task == Task::Classify {
                     self.probability_asked = None;
                 }
@@ -812,6 +828,9 @@ impl EndofuseApp {
                     self.pending_session = None;
                     self.loading_spec = None;
                 }
+                if task == Task::Job {
+                    self.exporting = None;
+                }
                 self.error = Some(message);
             }
         }
@@ -823,6 +842,7 @@ impl EndofuseApp {
         for e in self.worker.drain() {
             self.handle_event(e, ctx);
         }
+        views::receive_frames(self, ctx);
         let now = ctx.input(|i| i.time);
         if self.playing
             && let Some(scene) = &self.scene

@@ -20,6 +20,8 @@ use std::sync::Arc;
 #[derive(Default)]
 pub struct Textures {
     frames: Vec<Option<((usize, usize), TextureHandle)>>,
+    /// Frame asked of the loader per camera, not yet arrived.
+    requested: Vec<Option<usize>>,
     seeds: Vec<Option<((usize, u64), TextureHandle)>>,
     probability: Vec<Option<TextureHandle>>,
     pub probability_key: Option<(usize, Layer)>,
@@ -73,29 +75,61 @@ pub fn seed_value(app: &EndofuseApp, k: usize) -> u8 {
         .unwrap_or(SEED_BACKGROUND)
 }
 
-fn frame_texture(app: &mut EndofuseApp, ctx: &egui::Context, c: usize) -> Option<TextureHandle> {
+/// The current frame's texture of camera `c`; while a new frame decodes on the loader
+/// thread, the last one shown stays up.
+fn frame_texture(app: &mut EndofuseApp, c: usize) -> Option<TextureHandle> {
     let scene = app.scene.clone()?;
     let key = (c, app.frame);
-    let s = slot(&mut app.textures.frames, c);
-    if let Some((k, tex)) = s
-        && *k == key
+    let current = slot(&mut app.textures.frames, c).clone();
+    if current.as_ref().is_none_or(|(k, _)| *k != key)
+        && *slot(&mut app.textures.requested, c) != Some(app.frame)
     {
-        return Some(tex.clone());
+        app.loader.request(&scene, c, app.frame);
+        *slot(&mut app.textures.requested, c) = Some(app.frame);
     }
-    match scene.frame(c, app.frame) {
-        Ok(img) => {
-            let image =
-                ColorImage::from_rgb([img.width() as usize, img.height() as usize], img.as_raw());
-            let tex = ctx.load_texture(format!("frame-{c}"), image, TextureOptions::LINEAR);
-            *s = Some((key, tex.clone()));
-            Some(tex)
+    current.map(|(_, t)| t)
+}
+
+/// Uploads frames the loader finished (those still wanted).
+pub fn receive_frames(app: &mut EndofuseApp, ctx: &egui::Context) {
+    for l in app.loader.drain() {
+        if *slot(&mut app.textures.requested, l.camera) == Some(l.frame) {
+            *slot(&mut app.textures.requested, l.camera) = None;
         }
-        Err(e) => {
-            app.error = Some(e.to_string());
-            app.playing = false;
-            None
+        if l.frame != app.frame {
+            continue;
+        }
+        match l.image {
+            Ok(img) => {
+                let image = ColorImage::from_rgb(
+                    [img.width() as usize, img.height() as usize],
+                    img.as_raw(),
+                );
+                let tex =
+                    ctx.load_texture(format!("frame-{}", l.camera), image, TextureOptions::LINEAR);
+                *slot(&mut app.textures.frames, l.camera) = Some(((l.camera, l.frame), tex));
+                ctx.request_repaint();
+            }
+            Err(e) => {
+                app.error = Some(e);
+                app.playing = false;
+            }
         }
     }
+}
+
+/// True when every view shows the current frame.
+pub fn frames_ready(app: &EndofuseApp) -> bool {
+    let Some(scene) = &app.scene else {
+        return false;
+    };
+    (0..scene.cameras.len()).all(|c| {
+        app.textures
+            .frames
+            .get(c)
+            .and_then(|f| f.as_ref())
+            .is_some_and(|(k, _)| *k == (c, app.frame))
+    })
 }
 
 fn seeds_texture(app: &mut EndofuseApp, ctx: &egui::Context, c: usize) -> Option<TextureHandle> {
@@ -405,7 +439,7 @@ pub fn views(app: &mut EndofuseApp, ui: &mut egui::Ui) {
         painter.rect_filled(rect, 0.0, Color32::from_gray(12));
         let image_rect = transform.image_rect(rect, cam_size);
         let uv = Rect::from_min_max(pos2(0.0, 0.0), pos2(1.0, 1.0));
-        if let Some(tex) = frame_texture(app, &ctx, c) {
+        if let Some(tex) = frame_texture(app, c) {
             painter.image(tex.id(), image_rect, uv, Color32::WHITE);
         }
         if let Some(tex) = probability_texture(app, &ctx, c) {

@@ -1,0 +1,141 @@
+//! The app without a GPU (egui_kittest, no renderer: the overlay falls back to the CPU):
+//! placing the model by dragging, a session saved and loaded back, and the autosave written
+//! after a stroke.
+
+use egui::{Event, Modifiers, PointerButton, Pos2, pos2, vec2};
+use egui_kittest::Harness;
+use endofuse::app::actions::Action;
+use endofuse::app::{Dialogs, EndofuseApp, Tool};
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+/// Dialogs that answer with fixed paths.
+struct Scripted(PathBuf);
+
+impl Dialogs for Scripted {
+    fn pick_scene(&mut self) -> Option<PathBuf> {
+        None
+    }
+    fn pick_session(&mut self) -> Option<PathBuf> {
+        Some(self.0.clone())
+    }
+    fn save_session(&mut self) -> Option<PathBuf> {
+        Some(self.0.clone())
+    }
+    fn pick_folder(&mut self, _: &str) -> Option<PathBuf> {
+        Some(self.0.with_extension("export"))
+    }
+}
+
+fn scratch() -> PathBuf {
+    let d = std::env::temp_dir().join(format!("endofuse-app-session-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn step_until(h: &mut Harness<'_, EndofuseApp>, what: &str, done: impl Fn(&EndofuseApp) -> bool) {
+    let deadline = Instant::now() + Duration::from_secs(240);
+    while !done(h.state()) {
+        assert!(
+            Instant::now() < deadline,
+            "timed out waiting for {what}: {:?}",
+            h.state().error
+        );
+        h.step();
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    h.run_steps(3);
+}
+
+fn drag(h: &mut Harness<'_, EndofuseApp>, from: Pos2, to: Pos2) {
+    h.event(Event::PointerMoved(from));
+    h.step();
+    h.event(Event::PointerButton {
+        pos: from,
+        button: PointerButton::Primary,
+        pressed: true,
+        modifiers: Modifiers::NONE,
+    });
+    h.step();
+    for i in 1..=5 {
+        h.event(Event::PointerMoved(from + (to - from) * (i as f32 / 5.0)));
+        h.step();
+    }
+    h.event(Event::PointerButton {
+        pos: to,
+        button: PointerButton::Primary,
+        pressed: false,
+        modifiers: Modifiers::NONE,
+    });
+    h.step();
+}
+
+#[test]
+fn place_by_dragging_save_and_load_a_session_and_autosave() {
+    let dir = scratch();
+    let session = dir.join("s.endofuse.json");
+    let mut h = Harness::builder()
+        .with_size([1100.0, 680.0])
+        .with_accessibility_check(false)
+        .build_eframe(|cc| {
+            let mut app = EndofuseApp::new(cc, "demo", Box::new(Scripted(session.clone())));
+            app.autosave_dir = Some(dir.join("autosave"));
+            app
+        });
+    step_until(&mut h, "the demo", |a| {
+        a.scene.is_some() && a.frames_ready()
+    });
+
+    // Place tool: a drag to the right moves the model along camera 0's x axis only.
+    h.key_press(egui::Key::M);
+    h.step();
+    assert_eq!(h.state().tool, Tool::Place);
+    let before = h.state().placement.expect("the demo has an initial pose");
+    let v = h.state().layout.views[0];
+    drag(&mut h, v.center(), v.center() + vec2(40.0, 0.0));
+    let after = h.state().placement.unwrap();
+    let (t0, t1) = (before.translation_mm(), after.translation_mm());
+    assert!(t1.x - t0.x > 1.0, "moved right: {t0} → {t1}");
+    assert!((t1.y - t0.y).abs() < 0.2 * (t1.x - t0.x) && (t1.z - t0.z).abs() < 0.2 * (t1.x - t0.x));
+
+    // A stroke, then the autosave appears within a few seconds of app time.
+    h.key_press(egui::Key::B);
+    let v = h.state().layout.views[1];
+    drag(
+        &mut h,
+        v.center() - vec2(30.0, 0.0),
+        v.center() + vec2(30.0, 10.0),
+    );
+    assert!(h.state().unsaved());
+    let painted = h.state().editor.counts();
+    let autosaves = dir.join("autosave");
+    step_until(&mut h, "the autosave", |_| {
+        std::fs::read_dir(&autosaves)
+            .map(|d| d.count() > 0)
+            .unwrap_or(false)
+    });
+
+    // Save, undo the stroke, load the session: the stroke and the placement are back.
+    let ctx = h.ctx.clone();
+    h.state_mut().do_action(Action::SaveSession, &ctx);
+    assert!(
+        session.is_file() && !h.state().unsaved(),
+        "{:?}",
+        h.state().error
+    );
+    h.state_mut().do_action(Action::Undo, &ctx);
+    h.state_mut().placement = None;
+    assert_ne!(h.state().editor.counts(), painted);
+    h.state_mut().do_action(Action::LoadSession, &ctx);
+    assert_eq!(h.state().editor.counts(), painted, "{:?}", h.state().error);
+    assert_eq!(h.state().placement, Some(after));
+
+    // A damaged session file is one message in the window; nothing is lost.
+    std::fs::write(&session, "{ not json").unwrap();
+    h.state_mut().do_action(Action::LoadSession, &ctx);
+    let err = h.state().error.clone().unwrap_or_default();
+    assert!(err.contains("s.endofuse.json"), "{err}");
+    assert_eq!(h.state().editor.counts(), painted);
+    let _ = std::fs::remove_dir_all(&dir);
+}
