@@ -2,7 +2,7 @@
 //! placing the model by dragging, a session saved and loaded back, and the autosave written
 //! after a stroke.
 
-use egui::{Event, Modifiers, PointerButton, Pos2, pos2, vec2};
+use egui::{Event, Modifiers, PointerButton, Pos2, vec2};
 use egui_kittest::Harness;
 use endofuse::app::actions::Action;
 use endofuse::app::{Dialogs, EndofuseApp, Tool};
