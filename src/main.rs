@@ -170,6 +170,9 @@ fn run(cli: Cli) -> Result<()> {
             let scene = Scene::open(&scene, FrameCheck::Headers)?;
             let range = frame_range(frames.as_deref(), scene.frame_count)?;
             let m = endofuse::track::run(&scene, &out, mode, range, None, &progress("track"))?;
+            if let Some(r) = endofuse::fit::profile::report(m.frames) {
+                eprintln!("track: {r}");
+            }
             eprintln!(
                 "track: {} frames in mode {}, {} lost; {:.1} ms per frame (median), forest trained in {:.2} s",
                 m.frames,

@@ -68,8 +68,6 @@ pub struct FrameFeatures {
     integrals: Vec<Vec<u32>>,
     /// Integral of Y², for the local standard deviation.
     integral_y2: Vec<u64>,
-    /// Box-smoothed Y (radius 1), for the gradient.
-    smooth_y: Vec<f32>,
     radii: [usize; 4],
     /// Where this (possibly cropped) image sits in the full frame, and the full frame's size.
     offset: (usize, usize),
@@ -140,59 +138,61 @@ impl FrameFeatures {
         let base: Vec<[u8; 6]> = frame
             .as_raw()
             .par_chunks_exact(3)
-            .map(|p| {
-                let (r, g, b) = (p[0] as f32, p[1] as f32, p[2] as f32);
-                let s = r + g + b + 1e-3;
-                let y = 0.299 * r + 0.587 * g + 0.114 * b;
-                let cb = 128.0 + 0.564 * (b - y);
-                let cr = 128.0 + 0.713 * (r - y);
-                let q = |v: f32| v.round().clamp(0.0, 255.0) as u8;
-                [
-                    q(255.0 * r / s),
-                    q(255.0 * g / s),
-                    q(255.0 * b / s),
-                    q(y),
-                    q(cb),
-                    q(cr),
-                ]
-            })
+            .with_min_len(4096)
+            .map(|p| base_channels(p[0], p[1], p[2]))
             .collect();
-        // 15 integral images, one per channel, built in parallel.
-        let integrals: Vec<Vec<u32>> = (0..3 * HIST_BINS + 3)
-            .into_par_iter()
-            .map(|k| {
-                let value = |px: &[u8; 6]| -> u32 {
-                    if k < 3 * HIST_BINS {
-                        let (ch, bin) = (3 + k / HIST_BINS, k % HIST_BINS);
-                        (px[ch] as usize * HIST_BINS / 256 == bin) as u32
-                    } else {
-                        px[3 + (k - 3 * HIST_BINS)] as u32
-                    }
-                };
-                integral(w, h, |i| value(&base[i]))
-            })
-            .collect();
-        let integral_y2 = {
-            let mut out = vec![0u64; (w + 1) * (h + 1)];
+        // 16 summed-area tables (12 histogram bins, 3 channel sums, Y²), filled in two fused
+        // passes that run in parallel: one read of each pixel per pass instead of one per table.
+        let stride = w + 1;
+        // `add` adds a pixel's contribution to each table's running row sum.
+        let fill = |tables: usize, squares: bool, add: &(dyn Fn(&[u8; 6], &mut [u32]) + Sync)| {
+            let mut out: Vec<Vec<u32>> =
+                (0..tables).map(|_| vec![0u32; stride * (h + 1)]).collect();
+            let mut y2 = if squares {
+                vec![0u64; stride * (h + 1)]
+            } else {
+                Vec::new()
+            };
+            let mut row = vec![0u32; tables];
             for y in 0..h {
-                let mut row = 0u64;
+                row.fill(0);
+                let mut row2 = 0u64;
                 for x in 0..w {
-                    let v = base[y * w + x][3] as u64;
-                    row += v * v;
-                    out[(y + 1) * (w + 1) + x + 1] = out[y * (w + 1) + x + 1] + row;
+                    let px = &base[y * w + x];
+                    add(px, &mut row);
+                    let (o, up) = ((y + 1) * stride + x + 1, y * stride + x + 1);
+                    for (t, &r) in out.iter_mut().zip(&row) {
+                        t[o] = t[up] + r;
+                    }
+                    if squares {
+                        let v = px[3] as u64;
+                        row2 += v * v;
+                        y2[o] = y2[up] + row2;
+                    }
                 }
             }
-            out
+            (out, y2)
         };
-        let iy = &integrals[3 * HIST_BINS];
-        let smooth_y: Vec<f32> = (0..w * h)
-            .into_par_iter()
-            .map(|i| {
-                let (x, y) = (i % w, i / w);
-                let (sum, area) = box_sum(iy, w, h, x, y, 1);
-                sum as f32 / area as f32
-            })
-            .collect();
+        let bin = |v: u8| v as usize * HIST_BINS / 256;
+        let ((mut integrals, _), (rest, integral_y2)) = rayon::join(
+            // Histograms of Y and Cb.
+            || {
+                fill(2 * HIST_BINS, false, &|px, row| {
+                    row[bin(px[3])] += 1;
+                    row[HIST_BINS + bin(px[4])] += 1;
+                })
+            },
+            // Histogram of Cr, the Y, Cb, Cr sums and Y².
+            || {
+                fill(HIST_BINS + 3, true, &|px, row| {
+                    row[bin(px[5])] += 1;
+                    for c in 0..3 {
+                        row[HIST_BINS + c] += px[3 + c] as u32;
+                    }
+                })
+            },
+        );
+        integrals.extend(rest);
         let reference = full.0;
         let radii = [
             radius_for(reference, HIST_RADIUS_960),
@@ -208,7 +208,6 @@ impl FrameFeatures {
             base,
             integrals,
             integral_y2,
-            smooth_y,
             radii,
         }
     }
@@ -227,7 +226,7 @@ impl FrameFeatures {
         let mut f = [0u8; FEATURE_COUNT];
         let px = &self.base[y * w + x];
         f[..6].copy_from_slice(px);
-        let q = |v: f64| v.round().clamp(0.0, 255.0) as u8;
+        let q = |v: f64| (v.clamp(0.0, 255.0) + 0.5) as u8;
         let [rh, rs, rl, rc] = self.radii;
         for k in 0..3 * HIST_BINS {
             let (sum, area) = box_sum(&self.integrals[k], w, h, x, y, rh);
@@ -239,7 +238,13 @@ impl FrameFeatures {
                 f[18 + 3 * j + c] = q(sum as f64 / area as f64);
             }
         }
-        let s = |xx: usize, yy: usize| self.smooth_y[yy.min(h - 1) * w + xx.min(w - 1)];
+        // Y smoothed over 3×3, at the four neighbours only (cheaper than a plane when only
+        // pixels near contours are asked for).
+        let iy = &self.integrals[3 * HIST_BINS];
+        let s = |xx: usize, yy: usize| {
+            let (sum, area) = box_sum(iy, w, h, xx.min(w - 1), yy.min(h - 1), 1);
+            sum as f32 / area as f32
+        };
         let (xl, xr, yu, yd) = (x.saturating_sub(1), x + 1, y.saturating_sub(1), y + 1);
         let gx = s(xr, y) - s(xl, y);
         let gy = s(x, yd) - s(x, yu);
@@ -278,17 +283,38 @@ impl FrameFeatures {
     }
 }
 
-/// (w+1)×(h+1) summed-area table of `value(pixel index)`.
-fn integral(w: usize, h: usize, value: impl Fn(usize) -> u32) -> Vec<u32> {
-    let mut out = vec![0u32; (w + 1) * (h + 1)];
-    for y in 0..h {
-        let mut row = 0u32;
-        for x in 0..w {
-            row += value(y * w + x);
-            out[(y + 1) * (w + 1) + x + 1] = out[y * (w + 1) + x + 1] + row;
+/// 255·c / (r + g + b) in 16.16 fixed point, per channel sum 0…765 (0 for black).
+fn reciprocals() -> &'static [u32; 766] {
+    static TABLE: std::sync::OnceLock<[u32; 766]> = std::sync::OnceLock::new();
+    TABLE.get_or_init(|| {
+        let mut t = [0u32; 766];
+        for (s, v) in t.iter_mut().enumerate().skip(1) {
+            *v = ((255u64 << 16) as f64 / s as f64).round() as u32;
         }
-    }
-    out
+        t
+    })
+}
+
+/// nr, ng, nb, Y, Cb, Cr of one pixel, in 16.16 fixed point (the per-pixel cost of every
+/// feature query region; floating-point division and libm rounding cost three times as much).
+#[inline]
+fn base_channels(r: u8, g: u8, b: u8) -> [u8; 6] {
+    let (r, g, b) = (r as i64, g as i64, b as i64);
+    let recip = reciprocals()[(r + g + b) as usize] as i64;
+    // 0.299, 0.587, 0.114 × 65536 (sum 65536).
+    let y16 = 19595 * r + 38470 * g + 7471 * b;
+    // Cb = 128 + 0.564 (B − Y), Cr = 128 + 0.713 (R − Y).
+    let cb16 = (128 << 16) + ((36962 * ((b << 16) - y16)) >> 16);
+    let cr16 = (128 << 16) + ((46727 * ((r << 16) - y16)) >> 16);
+    let q = |v16: i64| ((v16 + 32768) >> 16).clamp(0, 255) as u8;
+    [
+        q(r * recip),
+        q(g * recip),
+        q(b * recip),
+        q(y16),
+        q(cb16),
+        q(cr16),
+    ]
 }
 
 /// Corners (x0, y0, x1, y1; end exclusive) of the window of radius r around (x, y), clipped

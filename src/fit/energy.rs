@@ -186,7 +186,9 @@ impl FrameContext<'_> {
             // only need "this structure just inside, something else just outside".
             let vis_size = ((size.0 / 2).max(1), (size.1 / 2).max(1));
             let vis_cam = level_camera(cam, &state.intrinsics[m], params.level + 1, vis_size);
-            let raster = rasterize(&vis_cam, &objects, &RasterOptions::default());
+            let raster = super::profile::time(super::profile::Phase::Raster, || {
+                rasterize(&vis_cam, &objects, &RasterOptions::default())
+            });
             let (vw, vh) = (vis_size.0 as i64, vis_size.1 as i64);
             let centre = cam.extrinsics.center_mm();
             let (w, h) = (size.0 as i64, size.1 as i64);
@@ -293,7 +295,9 @@ impl FrameContext<'_> {
                 .iter()
                 .flat_map(|l| l.samples.iter().map(|s| s.pixel))
                 .collect();
-            views[m].ensure(appearance, params.level, &pixels);
+            super::profile::time(super::profile::Phase::Probabilities, || {
+                views[m].ensure(appearance, params.level, &pixels)
+            });
             for line in &mut view_lines {
                 let class = self.class_of[line.structure].unwrap_or(0);
                 for s in &mut line.samples {

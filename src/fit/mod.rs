@@ -6,6 +6,7 @@ pub mod init;
 pub mod model;
 pub mod optimizer;
 pub mod probability;
+pub mod profile;
 pub mod tracker;
 
 pub use energy::{Block, EnergyParams, FitState, FrameContext};

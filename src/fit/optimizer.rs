@@ -120,13 +120,29 @@ fn energy_params(level: usize) -> EnergyParams {
 /// A line's softmin target shift (level px) and its variance, from its 1D energy profile.
 fn line_target(line: &Line, c: DVec2, ep: &EnergyParams) -> (f64, f64) {
     let r = (ep.half_length / 2) as i64;
+    // Samples lie one pixel apart along the normal, so every (sample, shift) pair sees the
+    // Heaviside at t₀ + m for an integer m: evaluate those few once instead of per pair.
+    let Some(first) = line.samples.first() else {
+        return (0.0, f64::INFINITY);
+    };
+    let t0 = line.normal.dot(c - first.pos);
+    let offsets: Vec<i64> = line
+        .samples
+        .iter()
+        .map(|s| (line.normal.dot(c - s.pos) - t0).round() as i64)
+        .collect();
+    let lo = offsets.iter().copied().min().unwrap_or(0) - r;
+    let hi = offsets.iter().copied().max().unwrap_or(0) + r;
+    let heaviside: Vec<f64> = (lo..=hi)
+        .map(|m| 1.0 / (1.0 + (-(t0 + m as f64) / ep.heaviside_px).exp()))
+        .collect();
     let profile: Vec<f64> = (-r..=r)
         .map(|delta| {
             line.samples
                 .iter()
-                .map(|s| {
-                    let d = line.normal.dot(c - s.pos) + delta as f64;
-                    let h = 1.0 / (1.0 + (-d / ep.heaviside_px).exp());
+                .zip(&offsets)
+                .map(|(s, &m)| {
+                    let h = heaviside[(m + delta - lo) as usize];
                     s.g_f as f64 * h + s.g_b as f64 * (1.0 - h)
                 })
                 .sum()
@@ -393,6 +409,11 @@ pub fn fit_frame(
     let mut last_level = None;
     for &level in &levels {
         let ep = energy_params(level);
+        // Lines live across blocks and rounds: rebuilt every `rebuild_every` steps and when the
+        // level changes (rim points re-project with the state at every evaluation, and
+        // ±10 px of samples outlast a few steps of motion).
+        let mut lines: Vec<Line> = Vec::new();
+        let mut since_build = usize::MAX;
         for _ in 0..params.rounds {
             for &block in &blocks {
                 // The affine only moves rigidly at coarse levels: a 12-dof fit to a blurred
@@ -402,8 +423,7 @@ pub fn fit_frame(
                 } else {
                     block
                 };
-                let mut lines = Vec::new();
-                for k in 0..params.steps {
+                for _ in 0..params.steps {
                     if params
                         .cancel
                         .as_ref()
@@ -411,21 +431,26 @@ pub fn fit_frame(
                     {
                         break;
                     }
-                    // Lines are rebuilt every `rebuild_every` steps: rim points re-project with
-                    // the state, and ±10 px of samples outlast a step or two of motion.
-                    if k % params.rebuild_every.max(1) == 0 {
-                        lines = ctx.build_lines(&state, views, appearance, &ep);
+                    if since_build >= params.rebuild_every.max(1) {
+                        lines = super::profile::time(super::profile::Phase::Lines, || {
+                            ctx.build_lines(&state, views, appearance, &ep)
+                        });
+                        since_build = 0;
                     }
+                    since_build += 1;
                     last_level = Some(level);
                     iterations += 1;
-                    match step(ctx, &lines, &state, prev, block, &ep, params) {
+                    let next = super::profile::time(super::profile::Phase::Steps, || {
+                        step(ctx, &lines, &state, prev, block, &ep, params)
+                    });
+                    match next {
                         Some(next) => state = next,
                         None => break,
                     }
                 }
-                last_lines = lines;
             }
         }
+        last_lines = lines;
     }
     let final_level = levels.last().copied().unwrap_or(0);
     let ep = energy_params(final_level);

@@ -169,19 +169,18 @@ impl ViewProbabilities {
             let (rx0, ry0) = (x0.saturating_sub(margin), y0.saturating_sub(margin));
             let (rx1, ry1) = ((x1 + margin).min(iw - 1), (y1 + margin).min(ih - 1));
             lv.region = Some((rx0, ry0, rx1 + 1 - rx0, ry1 + 1 - ry0));
-            lv.features = Some(FrameFeatures::region(
-                &image,
-                rx0,
-                ry0,
-                rx1 + 1 - rx0,
-                ry1 + 1 - ry0,
+            lv.features = Some(super::profile::time(
+                super::profile::Phase::Features,
+                || FrameFeatures::region(&image, rx0, ry0, rx1 + 1 - rx0, ry1 + 1 - ry0),
             ));
         }
         let Some(features) = lv.features.as_ref() else {
             return;
         };
         let coords: Vec<(u32, u32)> = missing.iter().map(|&i| (i % w, i / w)).collect();
-        let p = appearance.classify_pixels(features, &coords);
+        let p = super::profile::time(super::profile::Phase::Forest, || {
+            appearance.classify_pixels(features, &coords)
+        });
         for (j, &i) in missing.iter().enumerate() {
             lv.probs[i as usize * k..(i as usize + 1) * k].copy_from_slice(&p[j * k..(j + 1) * k]);
         }
