@@ -7,7 +7,10 @@ use egui_kittest::Harness;
 use endofuse::app::actions::Action;
 use endofuse::app::{Dialogs, EndofuseApp, Tool};
 use std::path::PathBuf;
-use std::time::{Duration, Instant};
+
+mod common;
+
+use common::app::step_until;
 
 /// Dialogs that answer with fixed paths.
 struct Scripted(PathBuf);
@@ -32,20 +35,6 @@ fn scratch() -> PathBuf {
     let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).unwrap();
     d
-}
-
-fn step_until(h: &mut Harness<'_, EndofuseApp>, what: &str, done: impl Fn(&EndofuseApp) -> bool) {
-    let deadline = Instant::now() + Duration::from_secs(240);
-    while !done(h.state()) {
-        assert!(
-            Instant::now() < deadline,
-            "timed out waiting for {what}: {:?}",
-            h.state().error
-        );
-        h.step();
-        std::thread::sleep(Duration::from_millis(10));
-    }
-    h.run_steps(3);
 }
 
 fn drag(h: &mut Harness<'_, EndofuseApp>, from: Pos2, to: Pos2) {
@@ -130,6 +119,13 @@ fn place_by_dragging_save_and_load_a_session_and_autosave() {
     h.state_mut().do_action(Action::LoadSession, &ctx);
     assert_eq!(h.state().editor.counts(), painted, "{:?}", h.state().error);
     assert_eq!(h.state().placement, Some(after));
+
+    // Seeds as the contract's label PNGs (the demo lives in memory: into a picked folder).
+    h.state_mut().do_action(Action::SaveSeeds, &ctx);
+    let seeds_dir = session.with_extension("export");
+    let written = endofuse::scene::labels::read_label_png(&seeds_dir.join("right/000000.png"))
+        .expect("seed PNG of the painted view and frame");
+    assert!(written.data.contains(&1), "kidney seeds in the PNG");
 
     // A damaged session file is one message in the window; nothing is lost.
     std::fs::write(&session, "{ not json").unwrap();

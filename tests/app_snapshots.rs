@@ -9,7 +9,9 @@ use egui_kittest::Harness;
 use endofuse::app::actions::Action;
 use endofuse::app::{EndofuseApp, Layer, NoDialogs, Tool};
 use std::path::Path;
-use std::time::{Duration, Instant};
+mod common;
+
+use common::app::step_until;
 
 const SIZE: [f32; 2] = [1180.0, 700.0];
 
@@ -28,42 +30,8 @@ fn harness() -> Harness<'static, EndofuseApp> {
         })
 }
 
-/// Steps the app (the worker runs on its own thread) until `done` holds.
-fn step_until(h: &mut Harness<'_, EndofuseApp>, what: &str, done: impl Fn(&EndofuseApp) -> bool) {
-    let deadline = Instant::now() + Duration::from_secs(240);
-    while !done(h.state()) {
-        assert!(
-            Instant::now() < deadline,
-            "timed out waiting for {what}; error: {:?}",
-            h.state().error
-        );
-        h.step();
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    // Let layout settle and the frames decoded on the loader thread arrive.
-    h.run_steps(2);
-    while !h.state().frames_ready() {
-        assert!(
-            Instant::now() < deadline,
-            "timed out waiting for the frames"
-        );
-        h.step();
-        std::thread::sleep(Duration::from_millis(10));
-    }
-    h.run_steps(2);
-}
-
 fn shoot(h: &mut Harness<'_, EndofuseApp>, name: &str) {
-    let deadline = Instant::now() + Duration::from_secs(60);
-    while !h.state().frames_ready() {
-        assert!(
-            Instant::now() < deadline,
-            "timed out waiting for the frames"
-        );
-        h.step();
-        std::thread::sleep(Duration::from_millis(10));
-    }
-    h.run_steps(2);
+    step_until(h, "the frames", |_| true);
     if std::env::var_os("UPDATE_SCREENSHOTS").is_some() {
         let img = h.render().expect("render");
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("screenshots/{name}.png"));

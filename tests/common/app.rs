@@ -1,0 +1,30 @@
+//! Driving the app in egui_kittest: step until a condition holds (the worker and the frame
+//! loader run on their own threads), then until every view shows its frame.
+
+use egui_kittest::Harness;
+use endofuse::app::EndofuseApp;
+use std::time::{Duration, Instant};
+
+/// Steps the app until `done` holds and the current frames are on screen.
+pub fn step_until(
+    h: &mut Harness<'_, EndofuseApp>,
+    what: &str,
+    done: impl Fn(&EndofuseApp) -> bool,
+) {
+    let deadline = Instant::now() + Duration::from_secs(240);
+    let wait = |h: &mut Harness<'_, EndofuseApp>, what: &str, ok: &dyn Fn(&EndofuseApp) -> bool| {
+        while !ok(h.state()) {
+            assert!(
+                Instant::now() < deadline,
+                "timed out waiting for {what}; error: {:?}",
+                h.state().error
+            );
+            h.step();
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    };
+    wait(h, what, &done);
+    h.run_steps(2);
+    wait(h, "the frames", &|a| a.frames_ready());
+    h.run_steps(2);
+}
