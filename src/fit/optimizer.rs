@@ -11,6 +11,7 @@ use crate::appearance::Appearance;
 use crate::geometry::Affine;
 use glam::{DVec2, DVec3};
 use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -201,27 +202,41 @@ pub fn step(
         return None;
     }
     let deformed = ctx.model.deformed(&state.shape);
-    let mut h = DMatrix::<f64>::zeros(n, n);
-    let mut b = DVector::<f64>::zeros(n);
-    for line in lines {
-        let Some(c) = ctx.contour_point(line, state, &deformed, ep.level) else {
-            continue;
-        };
-        let Some(j) = ctx.point_jacobian(line, state, &deformed, block, ep.level) else {
-            continue;
-        };
-        let (target, var) = line_target(line, c, ep);
-        let jn: Vec<f64> = j
-            .iter()
-            .map(|jk| line.normal.x * jk[0] + line.normal.y * jk[1])
-            .collect();
-        let w = 1.0 / var;
-        for r in 0..n {
-            b[r] += w * jn[r] * target;
-            for q in r..n {
-                h[(r, q)] += w * jn[r] * jn[q];
+    // Normal equations over lines, in fixed chunks in parallel, added up in order.
+    let partial = |chunk: &[Line]| {
+        let mut h = DMatrix::<f64>::zeros(n, n);
+        let mut b = DVector::<f64>::zeros(n);
+        for line in chunk {
+            let Some(c) = ctx.contour_point(line, state, &deformed, ep.level) else {
+                continue;
+            };
+            let Some(j) = ctx.point_jacobian(line, state, &deformed, block, ep.level) else {
+                continue;
+            };
+            let (target, var) = line_target(line, c, ep);
+            let jn: Vec<f64> = j
+                .iter()
+                .map(|jk| line.normal.x * jk[0] + line.normal.y * jk[1])
+                .collect();
+            let w = 1.0 / var;
+            for r in 0..n {
+                b[r] += w * jn[r] * target;
+                for q in r..n {
+                    h[(r, q)] += w * jn[r] * jn[q];
+                }
             }
         }
+        (h, b)
+    };
+    let parts: Vec<(DMatrix<f64>, DVector<f64>)> = lines
+        .par_chunks(super::energy::LINE_CHUNK)
+        .map(partial)
+        .collect();
+    let mut h = DMatrix::<f64>::zeros(n, n);
+    let mut b = DVector::<f64>::zeros(n);
+    for (ph, pb) in parts {
+        h += ph;
+        b += pb;
     }
     for r in 0..n {
         for q in 0..r {
