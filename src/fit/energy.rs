@@ -347,9 +347,20 @@ impl FrameContext<'_> {
 
     /// E (eq. 4 on the lines) at `state`. Lines whose rim point leaves the view add nothing.
     pub fn energy(&self, lines: &[Line], state: &FitState, params: &EnergyParams) -> f64 {
-        let deformed = self.model.deformed(&state.shape);
+        self.energy_with(lines, state, &self.model.deformed(&state.shape), params)
+    }
+
+    /// [`FrameContext::energy`] with the shape instance of `state` already at hand (blocks
+    /// that do not move the shape evaluate many poses of one instance).
+    pub fn energy_with(
+        &self,
+        lines: &[Line],
+        state: &FitState,
+        deformed: &[Vec<DVec3>],
+        params: &EnergyParams,
+    ) -> f64 {
         let line_energy = |line: &Line| {
-            let Some(c) = self.contour_point(line, state, &deformed, params.level) else {
+            let Some(c) = self.contour_point(line, state, deformed, params.level) else {
                 return 0.0;
             };
             line.samples

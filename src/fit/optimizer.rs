@@ -336,8 +336,14 @@ pub fn step(
     let cholesky = h.cholesky()?;
     // Accept only steps that lower the energy on these lines (plus the block's priors).
     let centre = ctx.model_centre(&deformed);
-    let objective =
-        |st: &FitState| ctx.energy(lines, st, ep) + prior_energy(ctx, st, block, params);
+    let objective = |st: &FitState| {
+        let e = if block == Block::Shape {
+            ctx.energy(lines, st, ep)
+        } else {
+            ctx.energy_with(lines, st, &deformed, ep)
+        };
+        e + prior_energy(ctx, st, block, params)
+    };
     let before = objective(state);
     let try_step = |delta: &DVector<f64>, tries: usize| -> Option<FitState> {
         if delta.iter().any(|v| !v.is_finite()) {
