@@ -335,41 +335,14 @@ mod tests {
     #[test]
     fn painting_keeps_other_classes_unless_asked_and_the_eraser_clears() {
         let mut e = editor();
-        e.dab(
-            0,
-            0,
-            10.0,
-            10.0,
-            4.0,
-            Dab::Paint {
-                value: 1,
-                overwrite: false,
-            },
-        );
+        let paint = |e: &mut SeedEditor, x: f32, value: u8, overwrite: bool| {
+            e.dab(0, 0, x, 10.0, 4.0, Dab::Paint { value, overwrite })
+        };
+        paint(&mut e, 10.0, 1, false);
         let kidney = count(e.layer(0, 0).unwrap(), 1);
-        e.dab(
-            0,
-            0,
-            14.0,
-            10.0,
-            4.0,
-            Dab::Paint {
-                value: 2,
-                overwrite: false,
-            },
-        );
+        paint(&mut e, 14.0, 2, false);
         assert_eq!(count(e.layer(0, 0).unwrap(), 1), kidney, "kidney kept");
-        e.dab(
-            0,
-            0,
-            14.0,
-            10.0,
-            4.0,
-            Dab::Paint {
-                value: 2,
-                overwrite: true,
-            },
-        );
+        paint(&mut e, 14.0, 2, true);
         assert!(
             count(e.layer(0, 0).unwrap(), 1) < kidney,
             "overwritten when asked"

@@ -43,6 +43,21 @@ fn slot<T>(v: &mut Vec<Option<T>>, i: usize) -> &mut Option<T> {
     &mut v[i]
 }
 
+/// An RGBA (unmultiplied) texture of `size` pixels.
+fn rgba_texture(
+    ctx: &egui::Context,
+    name: String,
+    size: [usize; 2],
+    rgba: &[u8],
+    options: TextureOptions,
+) -> TextureHandle {
+    ctx.load_texture(
+        name,
+        ColorImage::from_rgba_unmultiplied(size, rgba),
+        options,
+    )
+}
+
 fn colour32(c: [u8; 3], a: u8) -> Color32 {
     Color32::from_rgba_unmultiplied(c[0], c[1], c[2], a)
 }
@@ -153,8 +168,13 @@ fn seeds_texture(app: &mut EndofuseApp, ctx: &egui::Context, c: usize) -> Option
             px.copy_from_slice(&[c[0], c[1], c[2], 255]);
         }
     }
-    let image = ColorImage::from_rgba_unmultiplied([layer.width, layer.height], &rgba);
-    let tex = ctx.load_texture(format!("seeds-{c}"), image, TextureOptions::NEAREST);
+    let tex = rgba_texture(
+        ctx,
+        format!("seeds-{c}"),
+        [layer.width, layer.height],
+        &rgba,
+        TextureOptions::NEAREST,
+    );
     *slot(&mut app.textures.seeds, c) = Some((key, tex.clone()));
     Some(tex)
 }
@@ -202,8 +222,13 @@ fn probability_texture(
             })
             .collect(),
     };
-    let image = ColorImage::from_rgba_unmultiplied([m.width, m.height], &rgba);
-    let tex = ctx.load_texture(format!("prob-{c}"), image, TextureOptions::LINEAR);
+    let tex = rgba_texture(
+        ctx,
+        format!("prob-{c}"),
+        [m.width, m.height],
+        &rgba,
+        TextureOptions::LINEAR,
+    );
     *slot(&mut app.textures.probability, c) = Some(tex.clone());
     Some(tex)
 }
@@ -239,9 +264,14 @@ fn overlay_cpu_texture(
             [p.0[0], p.0[1], p.0[2], a]
         })
         .collect();
-    let image =
-        ColorImage::from_rgba_unmultiplied([cam.width as usize, cam.height as usize], &rgba);
-    let tex = ctx.load_texture(format!("overlay-{c}"), image, TextureOptions::LINEAR);
+    let size = [cam.width as usize, cam.height as usize];
+    let tex = rgba_texture(
+        ctx,
+        format!("overlay-{c}"),
+        size,
+        &rgba,
+        TextureOptions::LINEAR,
+    );
     *slot(&mut app.textures.overlay_cpu, c) = Some((t, tex.clone()));
     Some(tex)
 }
