@@ -129,11 +129,24 @@ pub fn tile(images: &[RgbImage], columns: usize) -> RgbImage {
 /// A tracked frame over camera `c`'s image: visible structures filled and outlined, hidden
 /// ones dashed, each in its scene colour (what the app's export writes).
 pub fn draw_tracked(img: &mut RgbImage, scene: &Scene, f: &TrackedFrame, c: usize) {
+    draw_fit(img, scene, &f.labels, &f.hidden, c, 0.3);
+}
+
+/// Fitted labels (fill opacity `alpha`) and hidden structures' masks of camera `c` over
+/// `img`, in the scene's colours.
+pub fn draw_fit(
+    img: &mut RgbImage,
+    scene: &Scene,
+    labels: &[LabelImage],
+    hidden: &[(String, Vec<Mask>)],
+    c: usize,
+    alpha: f32,
+) {
     let index = |l: u8| scene.structures.iter().position(|s| s.label == l);
-    if let Some(labels) = f.labels.get(c) {
-        draw_labels(img, labels, &index, 0.3);
+    if let Some(labels) = labels.get(c) {
+        draw_labels(img, labels, &index, alpha);
     }
-    for (name, masks) in &f.hidden {
+    for (name, masks) in hidden {
         let i = scene.structures.iter().position(|s| &s.name == name);
         if let (Some(i), Some(mask)) = (i, masks.get(c)) {
             draw_hidden(img, mask, i);

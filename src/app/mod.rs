@@ -24,6 +24,7 @@ use crate::fit::optimizer::Mode;
 use crate::fit::tracker::TrackedFrame;
 use crate::geometry::Affine;
 use crate::scene::Scene;
+use crate::scene::template::PathTemplate;
 use crate::worker::{Command, Event, Task, Worker};
 use actions::Action;
 use seeds::SeedEditor;
@@ -203,7 +204,6 @@ pub struct EndofuseApp {
 
     pub placement: Option<Affine>,
     pub results: BTreeMap<usize, FrameResult>,
-    tracked: HashMap<usize, Arc<TrackedFrame>>,
 
     pub busy: Option<Busy>,
     pub error: Option<String>,
@@ -278,7 +278,6 @@ impl EndofuseApp {
             retrain_due_s: None,
             placement: None,
             results: BTreeMap::new(),
-            tracked: HashMap::new(),
             busy: None,
             error: None,
             notice: None,
@@ -312,17 +311,15 @@ impl EndofuseApp {
         if let Some(spec) = self.loading_spec.take() {
             self.scene_spec = spec;
         }
-        let sizes: Vec<(usize, usize)> = scene
-            .cameras
-            .iter()
-            .map(|c| (c.width as usize, c.height as usize))
-            .collect();
-        self.editor = SeedEditor::new(&scene.seeds, sizes);
+        self.editor = SeedEditor::new(&scene.seeds, camera_sizes(&scene));
         self.seeds_sent = self.editor.revision;
         self.saved = (self.editor.revision, 0);
         self.autosaved = self.saved;
         self.model = Some(Arc::new(Model::from_scene(&scene)));
-        self.classes = Some(ClassMap::from_scene(&scene));
+        let classes = ClassMap::from_scene(&scene);
+        // Kidney (the first structure class) when there is one, else background.
+        self.class = 1.min(classes.len() - 1);
+        self.classes = Some(classes);
         self.styles = scene
             .structures
             .iter()
@@ -340,9 +337,7 @@ impl EndofuseApp {
         self.probability_asked = None;
         self.placement = scene.initial_pose;
         self.results.clear();
-        self.tracked.clear();
         self.textures = views::Textures::default();
-        self.class = 1.min(ClassMap::from_scene(&scene).len() - 1);
         let spec = self.scene_spec.clone();
         self.prefs.recent.retain(|r| r != &spec);
         if spec != "demo" {
@@ -389,11 +384,7 @@ impl EndofuseApp {
         let Some(scene) = self.scene.clone() else {
             return;
         };
-        let sizes: Vec<(usize, usize)> = scene
-            .cameras
-            .iter()
-            .map(|c| (c.width as usize, c.height as usize))
-            .collect();
+        let sizes = camera_sizes(&scene);
         match session::decode_seeds(&s.seeds, &sizes, path) {
             Ok(seeds) => {
                 self.editor = SeedEditor::new(&seeds, sizes);
@@ -408,7 +399,7 @@ impl EndofuseApp {
         self.settings = s.settings;
         self.placement = s.placement.or(self.placement);
         if let Some(f) = s.forest {
-            if f.classes == ClassMap::from_scene(&scene) {
+            if Some(&f.classes) == self.classes.as_ref() {
                 let f = Arc::new(f);
                 self.worker.send(Command::SetAppearance(f.clone()));
                 self.appearance = Some(f);
@@ -425,7 +416,6 @@ impl EndofuseApp {
             })
             .map(|r| (r.frame, r))
             .collect();
-        self.tracked.clear();
         self.textures = views::Textures::default();
         self.notice = Some(format!("Session {} restored.", path.display()));
     }
@@ -686,7 +676,11 @@ impl EndofuseApp {
         let result = match &scene.root {
             Some(root) => write_seeds_into_scene(&scene, root, &seeds),
             None => match self.dialogs.pick_folder("Folder for the seed PNGs") {
-                Some(dir) => write_seed_folder(&scene, &dir, &seeds).map(|n| (n, dir)),
+                Some(dir) => {
+                    let flat = PathTemplate::parse("{camera}/{frame:06}.png")
+                        .expect("the folder template is valid");
+                    write_seed_pngs(&scene, &dir, &flat, &seeds).map(|n| (n, dir))
+                }
                 None => return,
             },
         };
@@ -785,56 +779,45 @@ impl EndofuseApp {
                     self.frame = f.frame;
                 }
                 self.results.insert(f.frame, r);
-                if self.tracked.len() > 64 {
-                    self.tracked.clear();
-                }
-                self.tracked.insert(f.frame, Arc::new(*f));
             }
             Event::Dice { frame, dice } => {
                 if let Some(r) = self.results.get_mut(&frame) {
                     r.dice = dice;
                 }
             }
-            Event::Finished(task) => {
-                if self.busy.as_ref().is_some_and(|b| b.task == task) {
-                    self.busy = None;
-                }
-                if task == Task::Job
-                    && let Some(dir) = self.exporting.take()
-                {
-                    self.notice = Some(format!("Exported the tracked frames to {}", dir.display()));
-                }
-                if task == Task::Classify {
-                    self.probability_asked = None;
-                }
-            }
+            Event::Finished(task) => self.task_ended(task, true),
             Event::Cancelled(task) => {
-                if self.busy.as_ref().is_some_and(|b| b.task == task) {
-                    self.busy = None;
-                }
-                if task == Task::Classify {
-                    self.probability_asked = None;
-                }
+                self.task_ended(task, false);
                 self.notice = Some("Cancelled.".into());
             }
             Event::Failed { task, message } => {
-                if self.busy.as_ref().is_some_and(|b| b.task == task) {
-                    self.busy = None;
-                }
-                if task == Task::Classify {
-                    self.probability_asked = None;
-                }
-                if task == Task::Load {
-                    self.pending_session = None;
-                    self.loading_spec = None;
-                }
-                if task == Task::Job {
-                    self.exporting = None;
-                }
+                self.task_ended(task, false);
                 self.error = Some(message);
             }
         }
         ctx.request_repaint();
+    }
+
+    /// Bookkeeping when the worker ends `task`, however it ended (`finished`: it completed).
+    fn task_ended(&mut self, task: Task, finished: bool) {
+        if self.busy.as_ref().is_some_and(|b| b.task == task) {
+            self.busy = None;
+        }
+        match task {
+            Task::Classify => self.probability_asked = None,
+            Task::Load if !finished => {
+                self.pending_session = None;
+                self.loading_spec = None;
+            }
+            Task::Job => {
+                if let Some(dir) = self.exporting.take()
+                    && finished
+                {
+                    self.notice = Some(format!("Exported the tracked frames to {}", dir.display()));
+                }
+            }
+            _ => {}
+        }
     }
 
     /// Drains worker events; plays; schedules live retraining; autosaves.
@@ -983,6 +966,15 @@ impl eframe::App for EndofuseApp {
     }
 }
 
+/// (width, height) of every camera of a scene.
+fn camera_sizes(scene: &Scene) -> Vec<(usize, usize)> {
+    scene
+        .cameras
+        .iter()
+        .map(|c| (c.width as usize, c.height as usize))
+        .collect()
+}
+
 /// Opens the desktop app on `scene` (blocks until the window closes).
 pub fn run_native(scene: &str) -> anyhow::Result<()> {
     let options = eframe::NativeOptions {
@@ -1001,6 +993,27 @@ pub fn run_native(scene: &str) -> anyhow::Result<()> {
     .map_err(|e| anyhow::anyhow!("cannot open the window: {e}"))
 }
 
+/// Where seed PNGs go in a scene folder whose scene.json names none.
+const DEFAULT_SEEDS_TEMPLATE: &str = "seeds/{camera}/{frame:06}.png";
+
+/// Writes every painted view and frame as a label PNG at `dir`/`template`; returns how many.
+fn write_seed_pngs(
+    scene: &Scene,
+    dir: &Path,
+    template: &PathTemplate,
+    seeds: &crate::scene::Seeds,
+) -> Result<usize, crate::Error> {
+    let mut n = 0;
+    for (c, frames) in seeds.by_camera.iter().enumerate() {
+        for (&t, img) in frames {
+            let path = dir.join(template.expand(t, &scene.cameras[c].name, ""));
+            crate::scene::write::write_labels(&path, img)?;
+            n += 1;
+        }
+    }
+    Ok(n)
+}
+
 /// Writes seed PNGs into a scene folder; adds a `seeds` entry to its scene.json when it has
 /// none. Returns how many files were written and where.
 fn write_seeds_into_scene(
@@ -1008,23 +1021,10 @@ fn write_seeds_into_scene(
     root: &Path,
     seeds: &crate::scene::Seeds,
 ) -> Result<(usize, PathBuf), crate::Error> {
-    let template = scene
-        .seeds_template
-        .as_ref()
-        .map(|t| t.source().to_string())
-        .unwrap_or_else(|| "seeds/{camera}/{frame:06}.png".into());
-    let mut n = 0;
-    for (c, frames) in seeds.by_camera.iter().enumerate() {
-        for (&t, img) in frames {
-            let rel = crate::scene::template::PathTemplate::parse(&template)
-                .map(|tpl| PathBuf::from(tpl.expand(t, &scene.cameras[c].name, "")))
-                .unwrap_or_else(|_| {
-                    PathBuf::from(format!("seeds/{}/{t:06}.png", scene.cameras[c].name))
-                });
-            crate::scene::write::write_labels(&root.join(rel), img)?;
-            n += 1;
-        }
-    }
+    let template = scene.seeds_template.clone().unwrap_or_else(|| {
+        PathTemplate::parse(DEFAULT_SEEDS_TEMPLATE).expect("the default template is valid")
+    });
+    let n = write_seed_pngs(scene, root, &template, seeds)?;
     if scene.seeds_template.is_none() {
         let json = root.join("scene.json");
         let text = std::fs::read_to_string(&json).map_err(|source| crate::Error::Write {
@@ -1034,30 +1034,11 @@ fn write_seeds_into_scene(
         let mut v: serde_json::Value = serde_json::from_str(&text)
             .map_err(|e| crate::error::input_err(json.display().to_string(), e.to_string()))?;
         if let Some(o) = v.as_object_mut() {
-            o.insert("seeds".into(), serde_json::Value::String(template));
+            o.insert("seeds".into(), template.source().into());
         }
         crate::scene::write::write_json_atomic(&json, &v)?;
     }
     Ok((n, root.to_path_buf()))
-}
-
-/// Writes seed PNGs as `{dir}/{camera}/{frame:06}.png`.
-fn write_seed_folder(
-    scene: &Scene,
-    dir: &Path,
-    seeds: &crate::scene::Seeds,
-) -> Result<usize, crate::Error> {
-    let mut n = 0;
-    for (c, frames) in seeds.by_camera.iter().enumerate() {
-        for (&t, img) in frames {
-            crate::scene::write::write_labels(
-                &dir.join(format!("{}/{t:06}.png", scene.cameras[c].name)),
-                img,
-            )?;
-            n += 1;
-        }
-    }
-    Ok(n)
 }
 
 /// Re-renders tracked states and writes them as `endofuse track` does, plus overlay PNGs.

@@ -250,13 +250,7 @@ fn overlay_cpu_texture(
     let rendered = crate::fit::tracker::render_state(&scene, &model, &state);
     let cam = &scene.cameras[c];
     let mut img = image::RgbImage::new(cam.width, cam.height);
-    let index = |l: u8| scene.structures.iter().position(|s| s.label == l);
-    crate::overlay::draw_labels(&mut img, &rendered.labels[c], &index, 1.0);
-    for (name, masks) in &rendered.hidden {
-        if let Some(i) = scene.structures.iter().position(|s| &s.name == name) {
-            crate::overlay::draw_hidden(&mut img, &masks[c], i);
-        }
-    }
+    crate::overlay::draw_fit(&mut img, &scene, &rendered.labels, &rendered.hidden, c, 1.0);
     let rgba: Vec<u8> = img
         .pixels()
         .flat_map(|p| {
@@ -645,5 +639,4 @@ fn interact(
             }
         }
     }
-    let _ = Pos2::ZERO;
 }
