@@ -10,7 +10,7 @@ use crate::fit::optimizer::Mode;
 use crate::fit::tracker::{TrackOptions, TrackedFrame, initial_state, track};
 use crate::plane::dice;
 use crate::scene::labels::read_label_png;
-use crate::scene::write::{write_json_atomic, write_labels};
+use crate::scene::write::{write_json_atomic, write_labels, write_mask};
 use crate::scene::{Scene, Trajectory, TrajectoryFrame};
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -188,9 +188,9 @@ impl<'a> Recorder<'a> {
                 &f.labels[c],
             )?;
             for (name, masks) in &f.hidden {
-                write_labels(
+                write_mask(
                     &out.join(format!("hidden/{name}/{}/{t:06}.png", cam.name)),
-                    &masks[c].map(|&b| if b { 255 } else { 0 }),
+                    &masks[c],
                 )?;
             }
             if self.overlays {

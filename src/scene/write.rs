@@ -39,3 +39,8 @@ pub fn write_labels(path: &Path, labels: &crate::plane::LabelImage) -> Result<()
         source,
     })
 }
+
+/// Writes a mask as a label PNG: 255 inside, 0 outside (hidden structures' projections).
+pub fn write_mask(path: &Path, mask: &crate::plane::Mask) -> Result<(), Error> {
+    write_labels(path, &mask.map(|&b| if b { 255 } else { 0 }))
+}

@@ -13,7 +13,7 @@ use crate::rng::Rng;
 use crate::scene::format::{
     CameraEntry, FORMAT_V1, GroundTruthEntry, InitialPoseEntry, SceneFile, StructureEntry,
 };
-use crate::scene::write::{write_json_atomic, write_labels, write_rgb};
+use crate::scene::write::{write_json_atomic, write_labels, write_mask, write_rgb};
 use crate::scene::{GroundTruth, Scene, Seeds, Structure, Trajectory};
 use phantom::{FrameTruth, Phantom};
 use rayon::prelude::*;
@@ -152,9 +152,9 @@ pub fn write_scene(
                     &truth.labels[m],
                 )?;
                 for (name, masks) in &truth.hidden {
-                    write_labels(
+                    write_mask(
                         &dir.join(format!("gt/hidden/{name}/{}/{t:06}.png", cam.name)),
-                        &masks[m].map(|&b| if b { 255 } else { 0 }),
+                        &masks[m],
                     )?;
                 }
             }
