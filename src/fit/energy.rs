@@ -37,8 +37,10 @@ pub enum Block {
     Affine,
     /// The joint shape weights.
     Shape,
-    /// fx, fy, cx, cy, k1 of one camera.
-    Camera(usize),
+    /// fx, fy, cx, cy, k1 of each of the n cameras, five per camera in camera order. One
+    /// block for all: the stereo term ties the cameras together (a focal change in one view
+    /// alone moves every triangulated point), so they must move jointly.
+    Cameras(usize),
 }
 
 impl Block {
@@ -47,7 +49,7 @@ impl Block {
             Block::Rigid => 6,
             Block::Affine => 12,
             Block::Shape => model.shape.mode_count(),
-            Block::Camera(_) => 5,
+            Block::Cameras(n) => 5 * n,
         }
     }
 }
@@ -405,51 +407,81 @@ impl FrameContext<'_> {
             ]
         };
         Some(match block {
+            Block::Cameras(n) => {
+                let mut out = vec![[0.0; 2]; 5 * n];
+                let ji = intr.jacobian_intrinsics(pc)?;
+                for k in 0..5 {
+                    if let Some(o) = out.get_mut(5 * line.view + k) {
+                        *o = [s * ji[0][k], s * ji[1][k]];
+                    }
+                }
+                out
+            }
+            _ => {
+                let weights = [(line.a, 1.0 - line.t), (line.b, line.t)];
+                self.surface_jacobian(line.structure, &weights, p, pre, state, deformed, block)
+                    .into_iter()
+                    .map(jref)
+                    .collect()
+            }
+        })
+    }
+
+    /// ∂P/∂ξ (camera-0 coordinates, one column per parameter of `block`) of the model point
+    /// P = T(Σ wᵢ vᵢ(W)) made of `structure`'s deformed vertices with `weights`; `posed` is P
+    /// and `pre` its deformed preoperative position. The cameras do not move model points:
+    /// empty for camera blocks.
+    #[allow(clippy::too_many_arguments)]
+    pub fn surface_jacobian(
+        &self,
+        structure: usize,
+        weights: &[(u32, f64)],
+        posed: DVec3,
+        pre: DVec3,
+        state: &FitState,
+        deformed: &[Vec<DVec3>],
+        block: Block,
+    ) -> Vec<DVec3> {
+        match block {
             Block::Affine => {
                 let j = Affine::jacobian(pre);
                 (0..12)
-                    .map(|k| jref(DVec3::new(j[0][k], j[1][k], j[2][k])))
+                    .map(|k| DVec3::new(j[0][k], j[1][k], j[2][k]))
                     .collect()
             }
             Block::Rigid => {
                 // Increments about the current pose: P = R(δω)(P₀ − c₀) + c₀ + δt, where P₀ is
                 // the posed point; so ∂P/∂δω = −[P₀ − c₀]×, ∂P/∂δt = I (c₀: the model centre).
                 let centre = state.affine.apply(self.model_centre(deformed));
-                let q = p - centre;
+                let q = posed - centre;
                 let mut out = Vec::with_capacity(6);
                 for k in 0..3 {
                     let mut e = DVec3::ZERO;
                     e[k] = 1.0;
-                    out.push(jref(e.cross(q)));
+                    out.push(e.cross(q));
                 }
                 for k in 0..3 {
                     let mut e = DVec3::ZERO;
                     e[k] = 1.0;
-                    out.push(jref(e));
+                    out.push(e);
                 }
                 out
             }
             Block::Shape => {
                 let lin = state.affine.linear();
+                let part = self.model.structures[structure].part;
                 (0..self.model.shape.mode_count())
                     .map(|k| {
-                        let u = self
-                            .model
-                            .shape
-                            .mode_part(k, self.model.structures[line.structure].part);
-                        jref(lin * u[line.a as usize].lerp(u[line.b as usize], line.t))
+                        let u = self.model.shape.mode_part(k, part);
+                        lin * weights
+                            .iter()
+                            .map(|&(v, w)| u[v as usize] * w)
+                            .sum::<DVec3>()
                     })
                     .collect()
             }
-            Block::Camera(m) => {
-                if m != line.view {
-                    vec![[0.0; 2]; 5]
-                } else {
-                    let ji = intr.jacobian_intrinsics(pc)?;
-                    (0..5).map(|k| [s * ji[0][k], s * ji[1][k]]).collect()
-                }
-            }
-        })
+            Block::Cameras(_) => Vec::new(),
+        }
     }
 
     /// Centre about which rigid increments rotate: the anchor structure's vertex mean.
@@ -522,13 +554,14 @@ pub fn apply_increment(
                 *w += d;
             }
         }
-        Block::Camera(m) => {
-            let v = state.intrinsics[m].corrected();
-            let mut nv = v;
-            for k in 0..5 {
-                nv[k] += delta[k];
+        Block::Cameras(_) => {
+            for (intr, d) in out.intrinsics.iter_mut().zip(delta.chunks(5)) {
+                let mut v = intr.corrected();
+                for (x, dx) in v.iter_mut().zip(d) {
+                    *x += dx;
+                }
+                *intr = intr.with_corrected(v);
             }
-            out.intrinsics[m] = state.intrinsics[m].with_corrected(nv);
         }
     }
     out
@@ -598,8 +631,7 @@ mod tests {
                 Block::Rigid,
                 Block::Affine,
                 Block::Shape,
-                Block::Camera(0),
-                Block::Camera(1),
+                Block::Cameras(2),
             ] {
                 let g = ctx.gradient(&lines, &state, block, &ep);
                 let centre = ctx.model_centre(&model.deformed(&state.shape));
@@ -621,7 +653,7 @@ mod tests {
                             }
                         }
                         Block::Shape => 1e-3,
-                        Block::Camera(_) => [1e-2, 1e-2, 1e-2, 1e-2, 1e-5][k],
+                        Block::Cameras(_) => [1e-2, 1e-2, 1e-2, 1e-2, 1e-5][k % 5],
                     })
                     .collect();
                 let fd: Vec<f64> = (0..n)

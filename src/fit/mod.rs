@@ -7,6 +7,7 @@ pub mod model;
 pub mod optimizer;
 pub mod probability;
 pub mod profile;
+pub mod stereo;
 pub mod tracker;
 
 pub use energy::{Block, EnergyParams, FitState, FrameContext};

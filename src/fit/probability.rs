@@ -112,6 +112,12 @@ impl ViewProbabilities {
         }
     }
 
+    /// The frame at a pyramid level, when the probabilities come from one (not from labels).
+    pub fn level_image(&mut self, level: usize) -> Option<Arc<RgbImage>> {
+        self.levels.first()?.image.as_ref()?;
+        (level < self.levels.len()).then(|| self.image(level))
+    }
+
     pub fn level_count(&self) -> usize {
         self.levels.len()
     }

@@ -23,9 +23,11 @@ pub enum Phase {
     Forest,
     /// Gauss–Newton / Newton steps with their energy evaluations.
     Steps,
+    /// Stereo matching (its forest checks included).
+    Stereo,
 }
 
-const PHASES: [(Phase, &str); 7] = [
+const PHASES: [(Phase, &str); 8] = [
     (Phase::Pyramid, "pyramids"),
     (Phase::Lines, "lines in all"),
     (Phase::Raster, "visibility raster"),
@@ -33,9 +35,10 @@ const PHASES: [(Phase, &str); 7] = [
     (Phase::Features, "features"),
     (Phase::Forest, "forest"),
     (Phase::Steps, "steps"),
+    (Phase::Stereo, "stereo matching"),
 ];
 
-static NANOS: [AtomicU64; 7] = [const { AtomicU64::new(0) }; 7];
+static NANOS: [AtomicU64; 8] = [const { AtomicU64::new(0) }; 8];
 
 pub fn enabled() -> bool {
     static ON: OnceLock<bool> = OnceLock::new();

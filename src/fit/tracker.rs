@@ -72,6 +72,11 @@ impl TrackOptions {
                 // first frame and took seven frames to settle (hidden-tumour error +0.1 mm).
                 steps: 8,
                 pose_damping: 0.1,
+                // The initial pose may be centimetres off in depth: search disparities widely.
+                stereo: super::stereo::StereoParams {
+                    search_px: 12,
+                    ..Default::default()
+                },
                 ..FitParams::default()
             },
             next: FitParams {

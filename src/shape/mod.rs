@@ -146,6 +146,14 @@ pub fn build_joint_model(
                 .collect()
         })
         .collect();
+    let rest: Vec<DVec3> = meshes
+        .iter()
+        .flat_map(|m| m.vertices.iter().copied())
+        .collect();
+    let samples: Vec<Vec<DVec3>> = samples
+        .into_iter()
+        .map(|s| without_affine_part(&rest, &s))
+        .collect();
     let pca = if samples.is_empty() {
         PcaModel {
             mean: meshes
@@ -161,6 +169,49 @@ pub fn build_joint_model(
         PcaModel::from_samples(&samples, VARIANCE_SHARE, MAX_MODES)?
     };
     Ok(JointShapeModel { pca, parts, source })
+}
+
+/// `sample` with the affine part of its displacement from `rest` taken out: the
+/// least-squares d(x) ≈ A (x − c) + t over all vertices. The global affine T already moves,
+/// turns, scales and shears the anatomy; a shape mode that can do the same only trades off
+/// against it (and against depth), so the modes keep just what T cannot express: how the
+/// structures bend, bulge and move relative to each other. Samples whose size differs from
+/// `rest`, or degenerate (flat) rests, are returned as they are.
+pub fn without_affine_part(rest: &[DVec3], sample: &[DVec3]) -> Vec<DVec3> {
+    if rest.len() != sample.len() || rest.is_empty() {
+        return sample.to_vec();
+    }
+    let n = rest.len() as f64;
+    let c = rest.iter().copied().sum::<DVec3>() / n;
+    let mean_d = rest
+        .iter()
+        .zip(sample)
+        .map(|(r, s)| *s - *r)
+        .sum::<DVec3>()
+        / n;
+    // Normal equations: (Σ x xᵀ) Aᵀ = Σ x dᵀ with x = rest − c, d = displacement − mean.
+    let mut xx = glam::DMat3::ZERO;
+    let mut xd = glam::DMat3::ZERO;
+    for (r, s) in rest.iter().zip(sample) {
+        let x = *r - c;
+        let d = *s - *r - mean_d;
+        xx += outer(x, x);
+        xd += outer(x, d);
+    }
+    if xx.determinant().abs() < 1e-9 * n.powi(3) {
+        return sample.to_vec();
+    }
+    // xd = Σ x dᵀ, so Aᵀ = xx⁻¹ xd and A = (xx⁻¹ xd)ᵀ.
+    let a = (xx.inverse() * xd).transpose();
+    rest.iter()
+        .zip(sample)
+        .map(|(r, s)| *s - (a * (*r - c) + mean_d))
+        .collect()
+}
+
+/// x yᵀ.
+fn outer(x: DVec3, y: DVec3) -> glam::DMat3 {
+    glam::DMat3::from_cols(x * y.x, x * y.y, x * y.z)
 }
 
 fn anchor_or_largest(meshes: &[&Mesh]) -> usize {
@@ -216,6 +267,48 @@ mod tests {
     fn scaled_sphere(subdiv: u32, r: f64, c: DVec3) -> Mesh {
         let s = crate::synth::anatomy::icosphere(subdiv);
         Mesh::new(s.vertices.iter().map(|v| *v * r + c).collect(), s.faces)
+    }
+
+    #[test]
+    fn affine_part_is_removed_from_samples() {
+        let organ = scaled_sphere(2, 30.0, DVec3::new(5.0, -3.0, 100.0));
+        let rest = organ.vertices.clone();
+        let lin = glam::DMat3::from_cols_array(&[1.05, 0.02, -0.01, 0.03, 0.97, 0.04, 0.0, -0.02, 1.1]);
+        let t = DVec3::new(2.0, -1.0, 3.0);
+        // A local bulge near one vertex on top of an affine change.
+        let bump_at = rest[0];
+        let affine_and_bump: Vec<DVec3> = rest
+            .iter()
+            .map(|&p| {
+                let bump = DVec3::Z * 4.0 * (-(p - bump_at).length_squared() / 200.0).exp();
+                lin * p + t + bump
+            })
+            .collect();
+        let cleaned = without_affine_part(&rest, &affine_and_bump);
+        // What is left has no affine part of its own ...
+        let again = without_affine_part(&rest, &cleaned);
+        let drift = cleaned
+            .iter()
+            .zip(&again)
+            .map(|(a, b)| (*a - *b).length())
+            .fold(0.0, f64::max);
+        assert!(drift < 1e-9, "second removal moved points by {drift}");
+        // ... a pure affine change is removed entirely ...
+        let pure: Vec<DVec3> = rest.iter().map(|&p| lin * p + t).collect();
+        let left = without_affine_part(&rest, &pure)
+            .iter()
+            .zip(&rest)
+            .map(|(a, b)| (*a - *b).length())
+            .fold(0.0, f64::max);
+        assert!(left < 1e-9, "pure affine left {left} mm");
+        // ... and the bulge survives: the cleaned shape still bulges most at the bump.
+        let moved: Vec<f64> = cleaned
+            .iter()
+            .zip(&rest)
+            .map(|(a, b)| (*a - *b).length())
+            .collect();
+        let peak = moved.iter().cloned().fold(0.0, f64::max);
+        assert!(moved[0] > 0.5 * peak && peak > 2.0, "bulge {} of peak {peak}", moved[0]);
     }
 
     #[test]
