@@ -410,10 +410,8 @@ impl FrameContext<'_> {
             Block::Cameras(n) => {
                 let mut out = vec![[0.0; 2]; 5 * n];
                 let ji = intr.jacobian_intrinsics(pc)?;
-                for k in 0..5 {
-                    if let Some(o) = out.get_mut(5 * line.view + k) {
-                        *o = [s * ji[0][k], s * ji[1][k]];
-                    }
+                for (k, o) in out.iter_mut().skip(5 * line.view).take(5).enumerate() {
+                    *o = [s * ji[0][k], s * ji[1][k]];
                 }
                 out
             }
@@ -627,12 +625,7 @@ mod tests {
                 lines.iter().any(|l| l.view == 1) && lines.iter().any(|l| l.structure == 1),
                 "lines in both views and on the tumour"
             );
-            for block in [
-                Block::Rigid,
-                Block::Affine,
-                Block::Shape,
-                Block::Cameras(2),
-            ] {
+            for block in [Block::Rigid, Block::Affine, Block::Shape, Block::Cameras(2)] {
                 let g = ctx.gradient(&lines, &state, block, &ep);
                 let centre = ctx.model_centre(&model.deformed(&state.shape));
                 let n = block.size(&model);

@@ -336,7 +336,10 @@ pub fn step(
             // barely moves distortion (paper §IV-A), and a free k1 mimics a focal change.
             const RELATIVE: [f64; 5] = [1.0, 1.0, 1.0, 1.0, 100.0];
             let change = |m: usize| -> [f64; 5] {
-                let (cur, old) = (state.intrinsics[m].corrected(), prev.intrinsics[m].corrected());
+                let (cur, old) = (
+                    state.intrinsics[m].corrected(),
+                    prev.intrinsics[m].corrected(),
+                );
                 std::array::from_fn(|k| cur[k] - old[k])
             };
             let diag: Vec<f64> = (0..5 * cameras).map(|i| h[(i, i)]).collect();

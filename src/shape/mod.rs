@@ -183,12 +183,7 @@ pub fn without_affine_part(rest: &[DVec3], sample: &[DVec3]) -> Vec<DVec3> {
     }
     let n = rest.len() as f64;
     let c = rest.iter().copied().sum::<DVec3>() / n;
-    let mean_d = rest
-        .iter()
-        .zip(sample)
-        .map(|(r, s)| *s - *r)
-        .sum::<DVec3>()
-        / n;
+    let mean_d = rest.iter().zip(sample).map(|(r, s)| *s - *r).sum::<DVec3>() / n;
     // Normal equations: (Σ x xᵀ) Aᵀ = Σ x dᵀ with x = rest − c, d = displacement − mean.
     let mut xx = glam::DMat3::ZERO;
     let mut xd = glam::DMat3::ZERO;
@@ -273,7 +268,8 @@ mod tests {
     fn affine_part_is_removed_from_samples() {
         let organ = scaled_sphere(2, 30.0, DVec3::new(5.0, -3.0, 100.0));
         let rest = organ.vertices.clone();
-        let lin = glam::DMat3::from_cols_array(&[1.05, 0.02, -0.01, 0.03, 0.97, 0.04, 0.0, -0.02, 1.1]);
+        let lin =
+            glam::DMat3::from_cols_array(&[1.05, 0.02, -0.01, 0.03, 0.97, 0.04, 0.0, -0.02, 1.1]);
         let t = DVec3::new(2.0, -1.0, 3.0);
         // A local bulge near one vertex on top of an affine change.
         let bump_at = rest[0];
@@ -308,7 +304,11 @@ mod tests {
             .map(|(a, b)| (*a - *b).length())
             .collect();
         let peak = moved.iter().cloned().fold(0.0, f64::max);
-        assert!(moved[0] > 0.5 * peak && peak > 2.0, "bulge {} of peak {peak}", moved[0]);
+        assert!(
+            moved[0] > 0.5 * peak && peak > 2.0,
+            "bulge {} of peak {peak}",
+            moved[0]
+        );
     }
 
     #[test]
