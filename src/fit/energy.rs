@@ -14,7 +14,7 @@ use super::model::Model;
 use super::probability::ViewProbabilities;
 use crate::appearance::Appearance;
 use crate::geometry::{Affine, Camera, Intrinsics};
-use crate::render::raster::{RasterOptions, rasterize};
+use crate::render::raster::{RasterOptions, ViewRaster, rasterize};
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
 
@@ -178,10 +178,24 @@ impl FrameContext<'_> {
         appearance: &Appearance,
         params: &EnergyParams,
     ) -> Vec<Line> {
+        self.build_lines_and_rasters(state, views, appearance, params)
+            .0
+    }
+
+    /// [`FrameContext::build_lines`], also returning each view's visibility raster of the
+    /// visible structures, one level coarser than `params.level` (the stereo term looks its
+    /// surface points up there instead of rendering again).
+    pub fn build_lines_and_rasters(
+        &self,
+        state: &FitState,
+        views: &mut [ViewProbabilities],
+        appearance: &Appearance,
+        params: &EnergyParams,
+    ) -> (Vec<Line>, Vec<ViewRaster>) {
         let deformed = self.model.deformed(&state.shape);
         let posed = self.model.posed(&state.affine, &deformed);
         // Views are independent: build their lines in parallel, then concatenate in view order.
-        let per_view: Vec<Vec<Line>> = views
+        let per_view: Vec<(Vec<Line>, ViewRaster)> = views
             .par_iter_mut()
             .zip(self.cameras.par_iter())
             .enumerate()
@@ -319,10 +333,11 @@ impl FrameContext<'_> {
                         s.g_b = -(1.0 - p).ln();
                     }
                 }
-                view_lines
+                (view_lines, raster)
             })
             .collect();
-        per_view.into_iter().flatten().collect()
+        let (lines, rasters): (Vec<Vec<Line>>, Vec<ViewRaster>) = per_view.into_iter().unzip();
+        (lines.into_iter().flatten().collect(), rasters)
     }
 
     /// The rim point of a line in camera-0 coordinates and its deformed preoperative position.

@@ -7,7 +7,7 @@
 
 use super::energy::{Block, EnergyParams, FitState, FrameContext, Line, apply_increment};
 use super::probability::ViewProbabilities;
-use super::stereo::{StereoMatch, StereoParams, StereoTerm};
+use super::stereo::{StereoParams, StereoSet, StereoTerm};
 use crate::appearance::Appearance;
 use crate::geometry::Affine;
 use glam::{DVec2, DVec3};
@@ -200,7 +200,7 @@ fn line_target(line: &Line, c: DVec2, ep: &EnergyParams) -> (f64, f64) {
 pub fn step(
     ctx: &FrameContext,
     lines: &[Line],
-    matches: &[StereoMatch],
+    stereo: &StereoSet,
     state: &FitState,
     prev: &FitState,
     block: Block,
@@ -248,7 +248,7 @@ pub fn step(
         h += ph;
         b += pb;
     }
-    let stereo = StereoTerm::new(ctx, matches, state, params.stereo);
+    let stereo = StereoTerm::new(ctx, stereo, state, &deformed, params.stereo);
     stereo.add_normal_equations(ctx, state, &deformed, block, &mut h, &mut b);
     for r in 0..n {
         for q in 0..r {
@@ -479,7 +479,7 @@ pub fn fit_frame(
     let mut last_lines: Vec<Line> = Vec::new();
     let mut last_level = None;
     let finest = levels.last().copied().unwrap_or(0);
-    let mut matches: Vec<StereoMatch> = Vec::new();
+    let mut matches = StereoSet::default();
     for &level in &levels {
         let ep = energy_params(level);
         // Lines live across blocks and rounds: rebuilt every `rebuild_every` steps and when the
@@ -506,9 +506,11 @@ pub fn fit_frame(
                         break;
                     }
                     if since_build >= params.rebuild_every.max(1) {
-                        lines = super::profile::time(super::profile::Phase::Lines, || {
-                            ctx.build_lines(&state, views, appearance, &ep)
-                        });
+                        let rasters;
+                        (lines, rasters) =
+                            super::profile::time(super::profile::Phase::Lines, || {
+                                ctx.build_lines_and_rasters(&state, views, appearance, &ep)
+                            });
                         since_build = 0;
                         if !matched {
                             // Once per level, from the state the level starts at: the model moves
@@ -520,6 +522,7 @@ pub fn fit_frame(
                                     views,
                                     appearance,
                                     finest,
+                                    rasters.first(),
                                     &params.stereo,
                                 )
                             });

@@ -17,7 +17,7 @@ use super::energy::{Block, FitState, FrameContext};
 use super::probability::ViewProbabilities;
 use crate::appearance::Appearance;
 use crate::geometry::{Camera, Intrinsics};
-use crate::render::raster::{NO_OBJECT, NO_TRIANGLE, RasterOptions, rasterize};
+use crate::render::raster::{NO_OBJECT, NO_TRIANGLE, RasterOptions, ViewRaster, rasterize};
 use glam::{DVec2, DVec3};
 use image::RgbImage;
 use rayon::prelude::*;
@@ -70,6 +70,37 @@ pub struct StereoMatch {
     pub sigma_mm: f64,
 }
 
+/// The matches of one measurement and their points triangulated with the intrinsics they were
+/// measured at (kept: in most steps the intrinsics do not move).
+#[derive(Debug, Clone, Default)]
+pub struct StereoSet {
+    pub matches: Vec<StereoMatch>,
+    pub intrinsics: Vec<Intrinsics>,
+    points: Vec<Option<StereoPoint>>,
+}
+
+impl StereoSet {
+    pub fn new(cameras: &[Camera], intrinsics: &[Intrinsics], matches: Vec<StereoMatch>) -> Self {
+        let points = matches
+            .iter()
+            .map(|m| triangulate(cameras, intrinsics, m))
+            .collect();
+        Self {
+            matches,
+            intrinsics: intrinsics.to_vec(),
+            points,
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.matches.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.matches.is_empty()
+    }
+}
+
 /// A match triangulated at the current intrinsics.
 #[derive(Debug, Clone, Copy)]
 pub struct StereoPoint {
@@ -119,22 +150,40 @@ pub fn triangulate(
     })
 }
 
-/// Intensity (R + G + B: three channels' texture, a third of one channel's relative noise)
-/// sampled bilinearly; None outside the image.
-fn sample(img: &RgbImage, p: DVec2) -> Option<f64> {
-    let (w, h) = (img.width() as i64, img.height() as i64);
+/// An image's intensity, R + G + B: three channels' texture at a third of one channel's
+/// relative noise.
+struct Grey {
+    width: i64,
+    height: i64,
+    data: Vec<f32>,
+}
+
+impl Grey {
+    fn new(img: &RgbImage) -> Self {
+        Self {
+            width: img.width() as i64,
+            height: img.height() as i64,
+            data: img
+                .as_raw()
+                .chunks_exact(3)
+                .map(|p| p[0] as f32 + p[1] as f32 + p[2] as f32)
+                .collect(),
+        }
+    }
+}
+
+/// Intensity sampled bilinearly; None outside the image.
+fn sample(img: &Grey, p: DVec2) -> Option<f64> {
     let (x0, y0) = (p.x.floor() as i64, p.y.floor() as i64);
-    if x0 < 0 || y0 < 0 || x0 + 1 >= w || y0 + 1 >= h {
+    if x0 < 0 || y0 < 0 || x0 + 1 >= img.width || y0 + 1 >= img.height {
         return None;
     }
     let (fx, fy) = (p.x - x0 as f64, p.y - y0 as f64);
-    let raw = img.as_raw();
-    let g = |x: i64, y: i64| {
-        let i = ((y * w + x) * 3) as usize;
-        raw[i] as f64 + raw[i + 1] as f64 + raw[i + 2] as f64
-    };
-    let top = g(x0, y0) * (1.0 - fx) + g(x0 + 1, y0) * fx;
-    let bottom = g(x0, y0 + 1) * (1.0 - fx) + g(x0 + 1, y0 + 1) * fx;
+    let i = (y0 * img.width + x0) as usize;
+    let w = img.width as usize;
+    let g = |k: usize| img.data[k] as f64;
+    let top = g(i) * (1.0 - fx) + g(i + 1) * fx;
+    let bottom = g(i + w) * (1.0 - fx) + g(i + w + 1) * fx;
     Some(top * (1.0 - fy) + bottom * fy)
 }
 
@@ -153,7 +202,7 @@ fn normalise(v: &mut [f64]) -> bool {
 
 /// Images and cameras of one stereo pair at the matching level.
 struct Pair<'a> {
-    images: (&'a RgbImage, &'a RgbImage),
+    images: (&'a Grey, &'a Grey),
     cameras: (&'a Camera, &'a Camera),
     intrinsics: (&'a Intrinsics, &'a Intrinsics),
     /// Full-resolution → matching-level pixel scale.
@@ -198,26 +247,44 @@ fn match_point(
         return None;
     }
     let len = (2 * k + 2 * hw + 1) as usize;
-    let mut strip = vec![f64::NAN; side * len];
+    let mut strip = vec![0.0; side * len];
     for (row, dy) in (-hw..=hw).enumerate() {
         for j in 0..len {
             let along = j as f64 - (k + hw) as f64;
-            if let Some(v) = sample(pair.images.1, c0 + e * along + e_perp * dy as f64) {
-                strip[row * len + j] = v;
-            }
+            strip[row * len + j] = sample(pair.images.1, c0 + e * along + e_perp * dy as f64)?;
         }
     }
-    let mut window = vec![0.0; side * side];
+    // Column sums of the strip: each candidate window's sum and sum of squares from `side`
+    // columns instead of side² samples. The left patch has zero mean and unit norm, so
+    // NCC = Σ l·r / √(Σ r² − (Σ r)² / n).
+    let (mut col, mut col2) = (vec![0.0; len], vec![0.0; len]);
+    for row in strip.chunks_exact(len) {
+        for (j, v) in row.iter().enumerate() {
+            col[j] += v;
+            col2[j] += v * v;
+        }
+    }
+    let n = (side * side) as f64;
     let scores: Vec<Option<f64>> = (0..=(2 * k) as usize)
         .map(|shift| {
-            for row in 0..side {
-                window[row * side..(row + 1) * side]
-                    .copy_from_slice(&strip[row * len + shift..row * len + shift + side]);
-            }
-            if window.iter().any(|v| v.is_nan()) || !normalise(&mut window) {
+            let sum: f64 = col[shift..shift + side].iter().sum();
+            let sum2: f64 = col2[shift..shift + side].iter().sum();
+            let var = sum2 - sum * sum / n;
+            // Under one grey level of contrast per pixel the correlation is noise.
+            if var < n {
                 return None;
             }
-            Some(left.iter().zip(&window).map(|(a, b)| a * b).sum())
+            let dot: f64 = left
+                .chunks_exact(side)
+                .zip(strip.chunks_exact(len))
+                .map(|(l, r)| {
+                    l.iter()
+                        .zip(&r[shift..shift + side])
+                        .map(|(a, b)| a * b)
+                        .sum::<f64>()
+                })
+                .sum();
+            Some(dot / var.sqrt())
         })
         .collect();
     let (best, score) = scores
@@ -241,15 +308,36 @@ fn match_point(
 }
 
 /// Finds stereo matches on the model's visible surface in camera 0 at `state`. Points lie on
-/// a grid over the visible structures' region (rendered at `level`), kept away from its edges,
-/// where the forest agrees with the structure (its probabilities at `level`): tools and smoke
-/// in front of the organ give no points. Patches are matched at `level` too.
+/// a grid over the visible structures' region, kept away from its edges, where the forest
+/// agrees with the structure (its probabilities at `level`): tools and smoke in front of the
+/// organ give no points. Patches are matched at `level`. The surface is looked up one level
+/// coarser (a quarter of the pixels; grid points lie several pixels apart anyway): in
+/// `raster` when the caller has it for `state` (camera 0's visibility raster of the visible
+/// structures), else rendered here.
 pub fn measure(
     ctx: &FrameContext,
     state: &FitState,
     views: &mut [ViewProbabilities],
     appearance: &Appearance,
     level: usize,
+    raster: Option<&ViewRaster>,
+    params: &StereoParams,
+) -> StereoSet {
+    StereoSet::new(
+        ctx.cameras,
+        &state.intrinsics,
+        find_matches(ctx, state, views, appearance, level, raster, params),
+    )
+}
+
+/// The matches of [`measure`], not yet triangulated.
+fn find_matches(
+    ctx: &FrameContext,
+    state: &FitState,
+    views: &mut [ViewProbabilities],
+    appearance: &Appearance,
+    level: usize,
+    raster: Option<&ViewRaster>,
     params: &StereoParams,
 ) -> Vec<StereoMatch> {
     if views.len() < 2 || params.weight <= 0.0 || level >= views[0].level_count() {
@@ -262,21 +350,27 @@ pub fn measure(
     else {
         return Vec::new();
     };
+    let images: Vec<Grey> = images.par_iter().map(|i| Grey::new(i)).collect();
     let model = ctx.model;
     let visible: Vec<usize> = (0..model.structures.len())
         .filter(|&i| ctx.class_of[i].is_some())
         .collect();
-    let deformed = model.deformed(&state.shape);
-    let posed = model.posed(&state.affine, &deformed);
-    let objects = model.objects(&posed, &visible);
-    // The surface is looked up one level coarser than the patches: a quarter of the raster's
-    // pixels, and grid points lie several pixels apart anyway.
     let (w, h) = views[0].size(level);
-    let coarse = (level + 1).min(views[0].level_count() - 1);
-    let (rw, rh) = views[0].size(coarse);
-    let ratio = 1usize << (coarse - level);
-    let cam0 = super::energy::level_camera(&ctx.cameras[0], &state.intrinsics[0], coarse, (rw, rh));
-    let raster = rasterize(&cam0, &objects, &RasterOptions::default());
+    let rendered;
+    let raster = match raster {
+        Some(r) => r,
+        None => {
+            let posed = model.posed(&state.affine, &model.deformed(&state.shape));
+            let objects = model.objects(&posed, &visible);
+            let size = ((w / 2).max(1), (h / 2).max(1));
+            let cam0 =
+                super::energy::level_camera(&ctx.cameras[0], &state.intrinsics[0], level + 1, size);
+            rendered = rasterize(&cam0, &objects, &RasterOptions::default());
+            &rendered
+        }
+    };
+    let (rw, rh) = (raster.object.width, raster.object.height);
+    let ratio = 2usize;
     let covered = raster
         .object
         .data
@@ -312,17 +406,17 @@ pub fn measure(
             candidates.push((rx, ry, x, y, visible[o as usize]));
         }
     }
-    // The forest's word over each patch (a 3 × 3 grid spanning it): one edge of a tool inside
-    // a patch outweighs the tissue's faint texture, and the match follows the tool.
+    // The forest's word over each patch (its centre and corners): one edge of a tool inside a
+    // patch outweighs the tissue's faint texture, and the match follows the tool.
     let hw = params.half_window as usize;
     let patch_pixels = |x: usize, y: usize| {
         let (w, h) = (w, h);
-        [0usize, hw, 2 * hw].into_iter().flat_map(move |dy| {
-            [0usize, hw, 2 * hw].into_iter().map(move |dx| {
+        [(hw, hw), (0, 0), (2 * hw, 0), (0, 2 * hw), (2 * hw, 2 * hw)]
+            .into_iter()
+            .map(move |(dx, dy)| {
                 let (px, py) = ((x + dx).saturating_sub(hw), (y + dy).saturating_sub(hw));
                 (py.min(h - 1) * w + px.min(w - 1)) as u32
             })
-        })
     };
     let pixels: Vec<u32> = candidates
         .iter()
@@ -379,20 +473,28 @@ pub struct StereoTerm<'a> {
 }
 
 impl<'a> StereoTerm<'a> {
-    /// Triangulates every match with the intrinsics of `state` and takes its face's normal
-    /// there.
+    /// Triangulates every match with the intrinsics of `state` (reusing the set's points when
+    /// they are the ones measured with) and takes its face's normal there; `deformed` is the
+    /// shape instance of `state`.
     pub fn new(
         ctx: &FrameContext<'a>,
-        matches: &'a [StereoMatch],
+        set: &'a StereoSet,
         state: &FitState,
+        deformed: &[Vec<DVec3>],
         params: StereoParams,
     ) -> Self {
-        let deformed = ctx.model.deformed(&state.shape);
+        let same = state.intrinsics == set.intrinsics;
+        let matches = set.matches.as_slice();
         let anchors = matches
             .iter()
-            .map(|m| {
-                let p = triangulate(ctx.cameras, &state.intrinsics, m)?;
-                let posed = Self::face(m, &deformed)?.map(|v| state.affine.apply(v));
+            .zip(&set.points)
+            .map(|(m, p)| {
+                let p = if same {
+                    (*p)?
+                } else {
+                    triangulate(ctx.cameras, &state.intrinsics, m)?
+                };
+                let posed = Self::face(m, deformed)?.map(|v| state.affine.apply(v));
                 let normal = (posed[1] - posed[0])
                     .cross(posed[2] - posed[0])
                     .try_normalize()?;
@@ -675,6 +777,7 @@ mod tests {
             &mut views,
             &appearance,
             0,
+            None,
             &StereoParams::default(),
         );
         assert!(matches.len() >= 30, "{} matches", matches.len());
@@ -692,6 +795,7 @@ mod tests {
         let cams = phantom.cameras(0);
         let depth = rasterize(&cams[0], &objects, &RasterOptions::default()).depth_mm;
         let mut errors: Vec<f64> = matches
+            .matches
             .iter()
             .filter_map(|m| {
                 let p = triangulate(&scene.cameras, &truth.intrinsics, m)?.target_mm;
@@ -733,6 +837,7 @@ mod tests {
             &mut views,
             &appearance,
             0,
+            None,
             &StereoParams::default(),
         );
         assert!(matches.len() >= 20, "{} matches", matches.len());
@@ -745,7 +850,13 @@ mod tests {
         for i in state.intrinsics.iter_mut() {
             i.fx *= 0.97;
         }
-        let term = StereoTerm::new(&ctx, &matches, &state, StereoParams::default());
+        let term = StereoTerm::new(
+            &ctx,
+            &matches,
+            &state,
+            &model.deformed(&state.shape),
+            StereoParams::default(),
+        );
         let centre = ctx.model_centre(&model.deformed(&state.shape));
         for block in [Block::Rigid, Block::Affine, Block::Shape, Block::Cameras(2)] {
             let g = term.gradient(&ctx, &state, &model.deformed(&state.shape), block);
