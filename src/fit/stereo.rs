@@ -333,32 +333,15 @@ pub fn measure(
     raster: Option<&ViewRaster>,
     params: &StereoParams,
 ) -> StereoSet {
-    StereoSet::new(
-        ctx.cameras,
-        &state.intrinsics,
-        find_matches(ctx, state, views, appearance, level, raster, params),
-    )
-}
-
-/// The matches of [`measure`], not yet triangulated.
-fn find_matches(
-    ctx: &FrameContext,
-    state: &FitState,
-    views: &mut [ViewProbabilities],
-    appearance: &Appearance,
-    level: usize,
-    raster: Option<&ViewRaster>,
-    params: &StereoParams,
-) -> Vec<StereoMatch> {
     if views.len() < 2 || params.weight <= 0.0 || level >= views[0].level_count() {
-        return Vec::new();
+        return StereoSet::default();
     }
     let Some(images) = views
         .iter_mut()
         .map(|v| v.level_image(level))
         .collect::<Option<Vec<_>>>()
     else {
-        return Vec::new();
+        return StereoSet::default();
     };
     let images: Vec<Grey> = images.par_iter().map(|i| Grey::new(i)).collect();
     let model = ctx.model;
@@ -388,7 +371,7 @@ fn find_matches(
         .filter(|&&o| o != NO_OBJECT)
         .count();
     if covered == 0 {
-        return Vec::new();
+        return StereoSet::default();
     }
     let stride = ((covered as f64 / params.max_points as f64).sqrt().ceil() as usize).max(1);
     // Raster pixels of a neighbour checked either way: the patch lies inside the region.
@@ -444,7 +427,8 @@ fn find_matches(
         .filter(|&m| ctx.cameras[m].baseline_mm() > 0.1)
         .flat_map(|m| candidates.iter().map(move |c| (m, c)))
         .collect();
-    work.par_iter()
+    let matches = work
+        .par_iter()
         .filter_map(|&(m, &(rx, ry, x, y, si))| {
             let pair = Pair {
                 images: (&images[0], &images[m]),
@@ -468,7 +452,8 @@ fn find_matches(
                 sigma_mm,
             })
         })
-        .collect()
+        .collect();
+    StereoSet::new(ctx.cameras, &state.intrinsics, matches)
 }
 
 /// The stereo term of one set of matches at one state: triangulations, residuals, energy and
@@ -744,6 +729,29 @@ mod tests {
         (scene, appearance, phantom, truth)
     }
 
+    /// Stereo matches of frame 0 sought from `state`, at full resolution.
+    fn matches_at(
+        scene: &crate::scene::Scene,
+        appearance: &Appearance,
+        state: &FitState,
+    ) -> StereoSet {
+        let model = Model::from_scene(scene);
+        let ctx = FrameContext::new(&model, scene);
+        let classes = ClassMap::from_scene(scene);
+        let mut views: Vec<ViewProbabilities> = (0..2)
+            .map(|c| ViewProbabilities::new(scene.frame(c, 0).unwrap(), 3, classes.len()))
+            .collect();
+        measure(
+            &ctx,
+            state,
+            &mut views,
+            appearance,
+            0,
+            None,
+            &StereoParams::default(),
+        )
+    }
+
     #[test]
     fn triangulation_inverts_projection_under_distortion() {
         let (scene, ..) = setup();
@@ -772,24 +780,10 @@ mod tests {
     #[test]
     fn matches_recover_the_true_depth() {
         let (scene, appearance, phantom, truth) = setup();
-        let model = Model::from_scene(&scene);
-        let ctx = FrameContext::new(&model, &scene);
-        let classes = ClassMap::from_scene(&scene);
-        let mut views: Vec<ViewProbabilities> = (0..2)
-            .map(|c| ViewProbabilities::new(scene.frame(c, 0).unwrap(), 3, classes.len()))
-            .collect();
         // Start 6 mm too deep: the search must find the surface, not the model.
         let mut start = truth.clone();
         start.affine.q[11] += 6.0;
-        let matches = measure(
-            &ctx,
-            &start,
-            &mut views,
-            &appearance,
-            0,
-            None,
-            &StereoParams::default(),
-        );
+        let matches = matches_at(&scene, &appearance, &start);
         assert!(matches.len() >= 30, "{} matches", matches.len());
         let posed: Vec<Vec<DVec3>> = phantom
             .deformed(0)
@@ -837,19 +831,7 @@ mod tests {
         let (scene, appearance, _, truth) = setup();
         let model = Model::from_scene(&scene);
         let ctx = FrameContext::new(&model, &scene);
-        let classes = ClassMap::from_scene(&scene);
-        let mut views: Vec<ViewProbabilities> = (0..2)
-            .map(|c| ViewProbabilities::new(scene.frame(c, 0).unwrap(), 3, classes.len()))
-            .collect();
-        let matches = measure(
-            &ctx,
-            &truth,
-            &mut views,
-            &appearance,
-            0,
-            None,
-            &StereoParams::default(),
-        );
+        let matches = matches_at(&scene, &appearance, &truth);
         assert!(matches.len() >= 20, "{} matches", matches.len());
         // Off the truth, so that residuals (and the gradient) are not small; some beyond the
         // Huber threshold.
