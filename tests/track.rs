@@ -93,8 +93,9 @@ fn track_writes_the_contract_outputs_and_segments_the_phantom() {
     assert_eq!(m["dice"]["per_frame"].as_array().unwrap().len(), 6);
     let hidden = &m["hidden"]["tumour_endo"];
     assert!(hidden["dice_mean"].as_f64().unwrap() > 0.6, "{m}");
+    // The stereo depth term pins depth: 7.4 mm on this scene without it, 2.4 mm with it.
     assert!(
-        hidden["centroid_error_mm_mean"].as_f64().unwrap() < 12.0,
+        hidden["centroid_error_mm_mean"].as_f64().unwrap() < 4.0,
         "{m}"
     );
     assert!(
