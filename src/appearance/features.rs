@@ -94,6 +94,59 @@ fn radius_for(width: usize, r960: f64) -> usize {
     ((r960 * width as f64 / 960.0).round() as usize).max(1)
 }
 
+/// Recycled summed-area tables. The fit builds features over a fresh region of every frame:
+/// new tables each time cost page faults and zeroing over megabytes (15 u32 and one u64 table
+/// per pixel of the region), which taken from here they do not. Only the first row and column
+/// are zeroed: [`FrameFeatures::build`] writes every other entry before reading it.
+mod pool {
+    use std::sync::Mutex;
+
+    pub static U32: Mutex<Vec<Vec<u32>>> = Mutex::new(Vec::new());
+    pub static U64: Mutex<Vec<Vec<u64>>> = Mutex::new(Vec::new());
+    /// Buffers kept at most per pool (two views' worth of tables, and some).
+    const KEEP: usize = 64;
+
+    /// A table of `rows` rows of `stride` entries whose first row and first column are zero;
+    /// the rest holds whatever it held.
+    pub fn take<T: Copy + Default>(
+        pool: &Mutex<Vec<Vec<T>>>,
+        stride: usize,
+        rows: usize,
+    ) -> Vec<T> {
+        let len = stride * rows;
+        let found = pool.lock().ok().and_then(|mut free| {
+            let i = free.iter().position(|b| b.capacity() >= len)?;
+            Some(free.swap_remove(i))
+        });
+        let mut buf = found.unwrap_or_default();
+        buf.truncate(len);
+        buf.resize(len, T::default());
+        buf[..stride.min(len)].fill(T::default());
+        for row in buf.chunks_exact_mut(stride.max(1)) {
+            row[0] = T::default();
+        }
+        buf
+    }
+
+    /// Hands buffers back.
+    pub fn give<T>(pool: &Mutex<Vec<Vec<T>>>, buffers: impl IntoIterator<Item = Vec<T>>) {
+        if let Ok(mut free) = pool.lock() {
+            for b in buffers {
+                if free.len() < KEEP && b.capacity() > 0 {
+                    free.push(b);
+                }
+            }
+        }
+    }
+}
+
+impl Drop for FrameFeatures {
+    fn drop(&mut self) {
+        pool::give(&pool::U32, std::mem::take(&mut self.integrals));
+        pool::give(&pool::U64, [std::mem::take(&mut self.integral_y2)]);
+    }
+}
+
 impl FrameFeatures {
     pub fn new(frame: &RgbImage) -> Self {
         let full = (frame.width() as usize, frame.height() as usize);
@@ -146,10 +199,11 @@ impl FrameFeatures {
         let stride = w + 1;
         // `add` adds a pixel's contribution to each table's running row sum.
         let fill = |tables: usize, squares: bool, add: &(dyn Fn(&[u8; 6], &mut [u32]) + Sync)| {
-            let mut out: Vec<Vec<u32>> =
-                (0..tables).map(|_| vec![0u32; stride * (h + 1)]).collect();
+            let mut out: Vec<Vec<u32>> = (0..tables)
+                .map(|_| pool::take(&pool::U32, stride, h + 1))
+                .collect();
             let mut y2 = if squares {
-                vec![0u64; stride * (h + 1)]
+                pool::take(&pool::U64, stride, h + 1)
             } else {
                 Vec::new()
             };
@@ -388,6 +442,13 @@ mod tests {
                 rng.below(256) as u8,
             ])
         });
+        // Leave dirty tables in the pool first: recycled tables must give the same sums as
+        // fresh ones (only their first row and column are cleared).
+        let other = RgbImage::from_fn(w as u32 + 13, h as u32 + 7, |x, y| {
+            image::Rgb([(x * 7 + y) as u8, (y * 5) as u8, 255])
+        });
+        drop(FrameFeatures::new(&other));
+        drop(FrameFeatures::new(&other));
         let ff = FrameFeatures::new(&frame);
         let all = ff.all();
         let [rh, rs, rl, _] = ff.radii;
