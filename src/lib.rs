@@ -11,6 +11,7 @@ pub mod geometry;
 pub mod info;
 pub mod overlay;
 pub mod plane;
+pub mod pool;
 pub mod render;
 pub mod rng;
 pub mod scene;

@@ -94,56 +94,27 @@ fn radius_for(width: usize, r960: f64) -> usize {
     ((r960 * width as f64 / 960.0).round() as usize).max(1)
 }
 
-/// Recycled summed-area tables. The fit builds features over a fresh region of every frame:
-/// new tables each time cost page faults and zeroing over megabytes (15 u32 and one u64 table
-/// per pixel of the region), which taken from here they do not. Only the first row and column
-/// are zeroed: [`FrameFeatures::build`] writes every other entry before reading it.
-mod pool {
-    use std::sync::Mutex;
+/// Recycled summed-area tables: the fit builds features over a fresh region of every frame.
+/// Only a table's first row and column are cleared: [`FrameFeatures::build`] writes every other
+/// entry before reading it.
+static TABLES_U32: crate::pool::Pool<u32> = crate::pool::Pool::new();
+static TABLES_U64: crate::pool::Pool<u64> = crate::pool::Pool::new();
 
-    pub static U32: Mutex<Vec<Vec<u32>>> = Mutex::new(Vec::new());
-    pub static U64: Mutex<Vec<Vec<u64>>> = Mutex::new(Vec::new());
-    /// Buffers kept at most per pool (two views' worth of tables, and some).
-    const KEEP: usize = 64;
-
-    /// A table of `rows` rows of `stride` entries whose first row and first column are zero;
-    /// the rest holds whatever it held.
-    pub fn take<T: Copy + Default>(
-        pool: &Mutex<Vec<Vec<T>>>,
-        stride: usize,
-        rows: usize,
-    ) -> Vec<T> {
-        let len = stride * rows;
-        let found = pool.lock().ok().and_then(|mut free| {
-            let i = free.iter().position(|b| b.capacity() >= len)?;
-            Some(free.swap_remove(i))
-        });
-        let mut buf = found.unwrap_or_default();
-        buf.truncate(len);
-        buf.resize(len, T::default());
-        buf[..stride.min(len)].fill(T::default());
-        for row in buf.chunks_exact_mut(stride.max(1)) {
-            row[0] = T::default();
-        }
-        buf
+/// A (`rows` × `stride`) summed-area table from `pool`, first row and column zero.
+fn table<T: Copy + Default>(pool: &crate::pool::Pool<T>, stride: usize, rows: usize) -> Vec<T> {
+    let mut buf = pool.take(stride * rows, T::default());
+    let first = stride.min(buf.len());
+    buf[..first].fill(T::default());
+    for row in buf.chunks_exact_mut(stride.max(1)) {
+        row[0] = T::default();
     }
-
-    /// Hands buffers back.
-    pub fn give<T>(pool: &Mutex<Vec<Vec<T>>>, buffers: impl IntoIterator<Item = Vec<T>>) {
-        if let Ok(mut free) = pool.lock() {
-            for b in buffers {
-                if free.len() < KEEP && b.capacity() > 0 {
-                    free.push(b);
-                }
-            }
-        }
-    }
+    buf
 }
 
 impl Drop for FrameFeatures {
     fn drop(&mut self) {
-        pool::give(&pool::U32, std::mem::take(&mut self.integrals));
-        pool::give(&pool::U64, [std::mem::take(&mut self.integral_y2)]);
+        TABLES_U32.give(std::mem::take(&mut self.integrals));
+        TABLES_U64.give([std::mem::take(&mut self.integral_y2)]);
     }
 }
 
@@ -200,10 +171,10 @@ impl FrameFeatures {
         // `add` adds a pixel's contribution to each table's running row sum.
         let fill = |tables: usize, squares: bool, add: &(dyn Fn(&[u8; 6], &mut [u32]) + Sync)| {
             let mut out: Vec<Vec<u32>> = (0..tables)
-                .map(|_| pool::take(&pool::U32, stride, h + 1))
+                .map(|_| table(&TABLES_U32, stride, h + 1))
                 .collect();
             let mut y2 = if squares {
-                pool::take(&pool::U64, stride, h + 1)
+                table(&TABLES_U64, stride, h + 1)
             } else {
                 Vec::new()
             };

@@ -24,6 +24,15 @@ pub struct ViewProbabilities {
     classes: usize,
 }
 
+/// Recycled probability planes: one per fitted level, view and frame.
+static PROBABILITIES: crate::pool::Pool<f32> = crate::pool::Pool::new();
+
+impl Drop for ViewProbabilities {
+    fn drop(&mut self) {
+        PROBABILITIES.give(self.levels.iter_mut().map(|l| std::mem::take(&mut l.probs)));
+    }
+}
+
 impl ViewProbabilities {
     pub fn new(frame: Arc<RgbImage>, levels: usize, classes: usize) -> Self {
         let (w, h) = (frame.width() as usize, frame.height() as usize);
@@ -131,7 +140,9 @@ impl ViewProbabilities {
         let k = self.classes;
         let (w, h) = self.sizes[level];
         if self.levels[level].probs.is_empty() {
-            self.levels[level].probs = vec![f32::NAN; w * h * k];
+            let mut probs = PROBABILITIES.take(w * h * k, f32::NAN);
+            probs.fill(f32::NAN);
+            self.levels[level].probs = probs;
         }
         let lv = &self.levels[level];
         let w = w as u32;

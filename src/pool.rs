@@ -1,0 +1,77 @@
+//! Recycled buffers for the per-frame fit. Every tracked frame builds feature tables and
+//! probability planes of megabytes; fresh allocations of that size cost page faults and
+//! zeroing on every frame, recycled ones do not. A pool keeps a bounded number of buffers and
+//! hands out any that is large enough.
+
+use std::sync::Mutex;
+
+/// Bytes a pool keeps at most: two views' feature tables and probability planes at 960×540
+/// take about 14 MB; training on whole 1080p frames would otherwise park hundreds.
+const KEEP_BYTES: usize = 64 << 20;
+
+pub struct Pool<T> {
+    free: Mutex<Vec<Vec<T>>>,
+}
+
+impl<T: Copy> Pool<T> {
+    pub const fn new() -> Self {
+        Self {
+            free: Mutex::new(Vec::new()),
+        }
+    }
+
+    /// A buffer of `len` entries. Entries a recycled buffer already had keep whatever they
+    /// held; the caller clears what it reads before writing. Entries beyond are `fill`.
+    pub fn take(&self, len: usize, fill: T) -> Vec<T> {
+        let found = self.free.lock().ok().and_then(|mut free| {
+            let i = free.iter().position(|b| b.capacity() >= len)?;
+            Some(free.swap_remove(i))
+        });
+        let mut buf = found.unwrap_or_default();
+        buf.truncate(len);
+        buf.resize(len, fill);
+        buf
+    }
+
+    /// Hands buffers back (dropped when the pool is full).
+    pub fn give(&self, buffers: impl IntoIterator<Item = Vec<T>>) {
+        let bytes = |b: &Vec<T>| b.capacity() * std::mem::size_of::<T>();
+        if let Ok(mut free) = self.free.lock() {
+            let mut kept: usize = free.iter().map(bytes).sum();
+            for b in buffers {
+                if b.capacity() > 0 && kept + bytes(&b) <= KEEP_BYTES {
+                    kept += bytes(&b);
+                    free.push(b);
+                }
+            }
+        }
+    }
+}
+
+impl<T: Copy> Default for Pool<T> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn buffers_come_back_with_the_asked_length() {
+        let pool: Pool<u32> = Pool::new();
+        let mut a = pool.take(10, 7);
+        assert_eq!(a, vec![7; 10]);
+        a.iter_mut().for_each(|v| *v = 1);
+        pool.give([a]);
+        // Shorter: a recycled buffer, cut to length, old contents kept.
+        let b = pool.take(4, 0);
+        assert_eq!(b, vec![1; 4]);
+        pool.give([b]);
+        // Longer than any kept: fresh, filled.
+        let c = pool.take(20, 3);
+        assert_eq!(c.len(), 20);
+        assert!(c.iter().all(|&v| v == 3 || v == 1));
+    }
+}
