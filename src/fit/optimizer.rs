@@ -522,7 +522,9 @@ pub fn fit_frame(
                                     views,
                                     appearance,
                                     finest,
-                                    rasters.first(),
+                                    // The lines' rasters lie one level below `level`; the
+                                    // matcher wants them one below `finest`.
+                                    rasters.first().filter(|_| level == finest),
                                     &params.stereo,
                                 )
                             });
