@@ -34,8 +34,8 @@ pub struct StereoParams {
     /// Weight of the term against the silhouettes' (0 switches it off). Far above 1: the
     /// silhouette lines are many and strongly correlated (neighbouring lines share pixels and
     /// the forest's errors are smooth), so their summed log-likelihood overstates what they
-    /// know about depth; at 1 the kidney stayed 5 mm too deep on seed 5, at 16 3 mm, at 128
-    /// under 1 mm.
+    /// know about depth. At frame 0 of seed 5 the kidney stayed 5.0 mm too deep at weight 4,
+    /// 2.5 mm at 16 and 0.7 mm at 128.
     pub weight: f64,
     /// Points sought in camera 0 per partner view.
     pub max_points: usize,
