@@ -397,7 +397,8 @@ impl FrameContext<'_> {
             .sum()
     }
 
-    /// ∂c/∂ξ (2 × block size) of a line's rim point, at the line's level.
+    /// ∂c/∂ξ (2 × block size) of a line's rim point, at the line's level. `rotation_centre`
+    /// is [`FrameContext::rotation_centre`] of `state` (rigid blocks turn about it).
     pub fn point_jacobian(
         &self,
         line: &Line,
@@ -405,6 +406,7 @@ impl FrameContext<'_> {
         deformed: &[Vec<DVec3>],
         block: Block,
         level: usize,
+        rotation_centre: DVec3,
     ) -> Option<Vec<[f64; 2]>> {
         let cam = &self.cameras[line.view];
         let intr = &state.intrinsics[line.view];
@@ -432,18 +434,26 @@ impl FrameContext<'_> {
             }
             _ => {
                 let weights = [(line.a, 1.0 - line.t), (line.b, line.t)];
-                self.surface_jacobian(line.structure, &weights, p, pre, state, deformed, block)
-                    .into_iter()
-                    .map(jref)
-                    .collect()
+                self.surface_jacobian(
+                    line.structure,
+                    &weights,
+                    p,
+                    pre,
+                    state,
+                    block,
+                    rotation_centre,
+                )
+                .into_iter()
+                .map(jref)
+                .collect()
             }
         })
     }
 
     /// ∂P/∂ξ (camera-0 coordinates, one column per parameter of `block`) of the model point
     /// P = T(Σ wᵢ vᵢ(W)) made of `structure`'s deformed vertices with `weights`; `posed` is P
-    /// and `pre` its deformed preoperative position. The cameras do not move model points:
-    /// empty for camera blocks.
+    /// and `pre` its deformed preoperative position; rigid increments turn about
+    /// `rotation_centre`. The cameras do not move model points: empty for camera blocks.
     #[allow(clippy::too_many_arguments)]
     pub fn surface_jacobian(
         &self,
@@ -452,8 +462,8 @@ impl FrameContext<'_> {
         posed: DVec3,
         pre: DVec3,
         state: &FitState,
-        deformed: &[Vec<DVec3>],
         block: Block,
+        rotation_centre: DVec3,
     ) -> Vec<DVec3> {
         match block {
             Block::Affine => {
@@ -465,8 +475,7 @@ impl FrameContext<'_> {
             Block::Rigid => {
                 // Increments about the current pose: P = R(δω)(P₀ − c₀) + c₀ + δt, where P₀ is
                 // the posed point; so ∂P/∂δω = −[P₀ − c₀]×, ∂P/∂δt = I (c₀: the model centre).
-                let centre = state.affine.apply(self.model_centre(deformed));
-                let q = posed - centre;
+                let q = posed - rotation_centre;
                 let mut out = Vec::with_capacity(6);
                 for k in 0..3 {
                     let mut e = DVec3::ZERO;
@@ -502,6 +511,12 @@ impl FrameContext<'_> {
         crate::geometry::mesh::vertex_mean(&deformed[self.model.anchor])
     }
 
+    /// [`FrameContext::model_centre`] posed by `state`. A mean over the organ's vertices: taken
+    /// once per step, not once per line.
+    pub fn rotation_centre(&self, state: &FitState, deformed: &[Vec<DVec3>]) -> DVec3 {
+        state.affine.apply(self.model_centre(deformed))
+    }
+
     /// ∂E/∂ξ for a block, analytic.
     pub fn gradient(
         &self,
@@ -511,12 +526,15 @@ impl FrameContext<'_> {
         params: &EnergyParams,
     ) -> Vec<f64> {
         let deformed = self.model.deformed(&state.shape);
+        let rotation_centre = self.rotation_centre(state, &deformed);
         let mut g = vec![0.0; block.size(self.model)];
         for line in lines {
             let Some(c) = self.contour_point(line, state, &deformed, params.level) else {
                 continue;
             };
-            let Some(j) = self.point_jacobian(line, state, &deformed, block, params.level) else {
+            let Some(j) =
+                self.point_jacobian(line, state, &deformed, block, params.level, rotation_centre)
+            else {
                 continue;
             };
             // dE/d(normal displacement of c).

@@ -212,6 +212,8 @@ pub fn step(
         return None;
     }
     let deformed = ctx.model.deformed(&state.shape);
+    let centre = ctx.model_centre(&deformed);
+    let rotation_centre = state.affine.apply(centre);
     // Normal equations over lines, in fixed chunks in parallel, added up in order.
     let partial = |chunk: &[Line]| {
         let mut h = DMatrix::<f64>::zeros(n, n);
@@ -220,7 +222,9 @@ pub fn step(
             let Some(c) = ctx.contour_point(line, state, &deformed, ep.level) else {
                 continue;
             };
-            let Some(j) = ctx.point_jacobian(line, state, &deformed, block, ep.level) else {
+            let Some(j) =
+                ctx.point_jacobian(line, state, &deformed, block, ep.level, rotation_centre)
+            else {
                 continue;
             };
             let (target, var) = line_target(line, c, ep);
@@ -265,7 +269,6 @@ pub fn step(
     // unless the data move them.
     let groups: &[(std::ops::Range<usize>, Vec<f64>)] = &match block {
         Block::Rigid => {
-            let centre = ctx.model_centre(&deformed);
             let dev_rot = crate::geometry::pose::rotation_to_vector(
                 crate::geometry::pose::nearest_rotation(
                     state.affine.linear() * prev.affine.linear().inverse(),
@@ -375,7 +378,6 @@ pub fn step(
     }
     let cholesky = h.cholesky()?;
     // Accept only steps that lower the energy on these lines (plus the block's priors).
-    let centre = ctx.model_centre(&deformed);
     let objective = |st: &FitState| {
         let moved;
         let d = if block == Block::Shape {

@@ -101,14 +101,6 @@ impl StereoSet {
             points,
         }
     }
-
-    pub fn len(&self) -> usize {
-        self.matches.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.matches.is_empty()
-    }
 }
 
 /// A match triangulated at the current intrinsics.
@@ -527,11 +519,6 @@ impl<'a> StereoTerm<'a> {
         }
     }
 
-    /// Whether any match could be triangulated.
-    pub fn is_empty(&self) -> bool {
-        self.anchors.iter().all(Option::is_none)
-    }
-
     /// The deformed preoperative vertices of a match's face.
     fn face(m: &StereoMatch, deformed: &[Vec<DVec3>]) -> Option<[DVec3; 3]> {
         let d = deformed.get(m.structure)?;
@@ -684,6 +671,7 @@ impl<'a> StereoTerm<'a> {
         block: Block,
         mut f: impl FnMut(&[f64], f64, f64),
     ) {
+        let rotation_centre = ctx.rotation_centre(state, deformed);
         for i in 0..self.matches.len() {
             let Some((r, sigma, posed, pre, normal)) = self.residual(i, state, deformed) else {
                 continue;
@@ -695,10 +683,18 @@ impl<'a> StereoTerm<'a> {
                 };
                 row
             } else {
-                ctx.surface_jacobian(m.structure, &m.vertices, posed, pre, state, deformed, block)
-                    .iter()
-                    .map(|c| normal.dot(*c))
-                    .collect()
+                ctx.surface_jacobian(
+                    m.structure,
+                    &m.vertices,
+                    posed,
+                    pre,
+                    state,
+                    block,
+                    rotation_centre,
+                )
+                .iter()
+                .map(|c| normal.dot(*c))
+                .collect()
             };
             let w = self.params.weight * self.robust(r / sigma) / (sigma * sigma);
             f(&row, r, w);
@@ -800,7 +796,11 @@ mod tests {
         let mut start = truth.clone();
         start.affine.q[11] += 6.0;
         let matches = matches_at(&scene, &appearance, &start);
-        assert!(matches.len() >= 30, "{} matches", matches.len());
+        assert!(
+            matches.matches.len() >= 30,
+            "{} matches",
+            matches.matches.len()
+        );
         let posed: Vec<Vec<DVec3>> = phantom
             .deformed(0)
             .iter()
@@ -848,7 +848,11 @@ mod tests {
         let model = Model::from_scene(&scene);
         let ctx = FrameContext::new(&model, &scene);
         let matches = matches_at(&scene, &appearance, &truth);
-        assert!(matches.len() >= 20, "{} matches", matches.len());
+        assert!(
+            matches.matches.len() >= 20,
+            "{} matches",
+            matches.matches.len()
+        );
         // Off the truth, so that residuals (and the gradient) are not small; some beyond the
         // Huber threshold.
         let mut state = truth.clone();
