@@ -170,6 +170,14 @@ impl<'a> FrameContext<'a> {
 }
 
 impl FrameContext<'_> {
+    /// The structures with an image term (a forest class), in the order their render objects
+    /// take in the visibility rasters: a raster's object id `o` is structure `imaged()[o]`.
+    pub fn imaged(&self) -> Vec<usize> {
+        (0..self.model.structures.len())
+            .filter(|&i| self.class_of[i].is_some())
+            .collect()
+    }
+
     /// Builds the lines of every view at the current state and fills their probabilities.
     pub fn build_lines(
         &self,
@@ -194,6 +202,7 @@ impl FrameContext<'_> {
     ) -> (Vec<Line>, Vec<ViewRaster>) {
         let deformed = self.model.deformed(&state.shape);
         let posed = self.model.posed(&state.affine, &deformed);
+        let visible = self.imaged();
         // Views are independent: build their lines in parallel, then concatenate in view order.
         let per_view: Vec<(Vec<Line>, ViewRaster)> = views
             .par_iter_mut()
@@ -202,9 +211,6 @@ impl FrameContext<'_> {
             .map(|(m, (view, cam))| {
                 let size = view.size(params.level);
                 let lcam = level_camera(cam, &state.intrinsics[m], params.level, size);
-                let visible: Vec<usize> = (0..self.model.structures.len())
-                    .filter(|&i| self.class_of[i].is_some())
-                    .collect();
                 let objects = self.model.objects(&posed, &visible);
                 // Visibility is judged one level coarser: a quarter of the pixels, and rim points
                 // only need "this structure just inside, something else just outside".

@@ -353,9 +353,7 @@ pub fn measure(
     };
     let images: Vec<Grey> = images.par_iter().map(|i| Grey::new(i)).collect();
     let model = ctx.model;
-    let visible: Vec<usize> = (0..model.structures.len())
-        .filter(|&i| ctx.class_of[i].is_some())
-        .collect();
+    let visible = ctx.imaged();
     let (w, h) = views[0].size(level);
     let rendered;
     let raster = match raster {
