@@ -141,6 +141,21 @@ impl ProbabilityMaps {
 }
 
 impl Appearance {
+    /// A forest of `trees` trees (default settings otherwise) on the scene's seeds: what the
+    /// fit's tests stand on.
+    #[cfg(test)]
+    pub(crate) fn for_tests(scene: &Scene, trees: usize) -> Appearance {
+        Appearance::train(
+            scene,
+            &ForestParams {
+                trees,
+                ..ForestParams::default()
+            },
+            None,
+        )
+        .expect("the phantom's seeds train a forest")
+    }
+
     /// Trains the forest on every seeded pixel of every seeded frame in every view.
     pub fn train(
         scene: &Scene,

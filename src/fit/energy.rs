@@ -403,9 +403,30 @@ impl FrameContext<'_> {
             .sum()
     }
 
+    /// A line's contour point c now (as [`FrameContext::contour_point`]) and n·∂c/∂ξ: how the
+    /// block's parameters move it along the line's normal. What both the Gauss–Newton step and
+    /// the analytic gradient need of every line; None where c leaves the view.
+    pub fn line_jacobian(
+        &self,
+        line: &Line,
+        state: &FitState,
+        deformed: &[Vec<DVec3>],
+        block: Block,
+        level: usize,
+        rotation_centre: DVec3,
+    ) -> Option<(DVec2, Vec<f64>)> {
+        let c = self.contour_point(line, state, deformed, level)?;
+        let j = self.point_jacobian(line, state, deformed, block, level, rotation_centre)?;
+        let jn = j
+            .iter()
+            .map(|jk| line.normal.x * jk[0] + line.normal.y * jk[1])
+            .collect();
+        Some((c, jn))
+    }
+
     /// ∂c/∂ξ (2 × block size) of a line's rim point, at the line's level. `rotation_centre`
     /// is [`FrameContext::rotation_centre`] of `state` (rigid blocks turn about it).
-    pub fn point_jacobian(
+    fn point_jacobian(
         &self,
         line: &Line,
         state: &FitState,
@@ -535,11 +556,8 @@ impl FrameContext<'_> {
         let rotation_centre = self.rotation_centre(state, &deformed);
         let mut g = vec![0.0; block.size(self.model)];
         for line in lines {
-            let Some(c) = self.contour_point(line, state, &deformed, params.level) else {
-                continue;
-            };
-            let Some(j) =
-                self.point_jacobian(line, state, &deformed, block, params.level, rotation_centre)
+            let Some((c, jn)) =
+                self.line_jacobian(line, state, &deformed, block, params.level, rotation_centre)
             else {
                 continue;
             };
@@ -552,8 +570,8 @@ impl FrameContext<'_> {
                     (s.g_f - s.g_b) as f64 * dh
                 })
                 .sum();
-            for (gk, jk) in g.iter_mut().zip(&j) {
-                *gk += de * (line.normal.x * jk[0] + line.normal.y * jk[1]);
+            for (gk, jk) in g.iter_mut().zip(&jn) {
+                *gk += de * jk;
             }
         }
         g
@@ -607,7 +625,7 @@ pub fn apply_increment(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::appearance::{Appearance, ForestParams};
+    use crate::appearance::Appearance;
     use crate::synth::{SynthOptions, memory_scene};
 
     /// Central differences of E (lines fixed) against the analytic gradient, for every block,
@@ -622,15 +640,7 @@ mod tests {
             ..SynthOptions::default()
         })
         .unwrap();
-        let appearance = Appearance::train(
-            &scene,
-            &ForestParams {
-                trees: 5,
-                ..ForestParams::default()
-            },
-            None,
-        )
-        .unwrap();
+        let appearance = Appearance::for_tests(&scene, 5);
         let model = Model::from_scene(&scene);
         let classes = crate::appearance::ClassMap::from_scene(&scene);
         let ctx = FrameContext::new(&model, &scene);

@@ -219,19 +219,12 @@ pub fn step(
         let mut h = DMatrix::<f64>::zeros(n, n);
         let mut b = DVector::<f64>::zeros(n);
         for line in chunk {
-            let Some(c) = ctx.contour_point(line, state, &deformed, ep.level) else {
-                continue;
-            };
-            let Some(j) =
-                ctx.point_jacobian(line, state, &deformed, block, ep.level, rotation_centre)
+            let Some((c, jn)) =
+                ctx.line_jacobian(line, state, &deformed, block, ep.level, rotation_centre)
             else {
                 continue;
             };
             let (target, var) = line_target(line, c, ep);
-            let jn: Vec<f64> = j
-                .iter()
-                .map(|jk| line.normal.x * jk[0] + line.normal.y * jk[1])
-                .collect();
             let w = 1.0 / var;
             for r in 0..n {
                 b[r] += w * jn[r] * target;

@@ -703,7 +703,7 @@ impl<'a> StereoTerm<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::appearance::{Appearance, ClassMap, ForestParams};
+    use crate::appearance::{Appearance, ClassMap};
     use crate::fit::Model;
     use crate::fit::energy::apply_increment;
     use crate::render::raster::RenderObject;
@@ -720,15 +720,7 @@ mod tests {
             ..SynthOptions::default()
         };
         let scene = crate::synth::memory_scene(&options).unwrap();
-        let appearance = Appearance::train(
-            &scene,
-            &ForestParams {
-                trees: 8,
-                ..ForestParams::default()
-            },
-            None,
-        )
-        .unwrap();
+        let appearance = Appearance::for_tests(&scene, 8);
         let phantom = Phantom::new(options);
         let model = Model::from_scene(&scene);
         let truth = FitState {

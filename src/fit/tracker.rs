@@ -339,7 +339,6 @@ pub fn track(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::appearance::ForestParams;
     use crate::fit::probability::ViewProbabilities;
     use crate::synth::{SynthOptions, memory_scene};
 
@@ -357,15 +356,7 @@ mod tests {
             ..SynthOptions::default()
         })
         .unwrap();
-        let appearance = Appearance::train(
-            &scene,
-            &ForestParams {
-                trees: 2,
-                ..ForestParams::default()
-            },
-            None,
-        )
-        .unwrap();
+        let appearance = Appearance::for_tests(&scene, 2);
         let model = Model::from_scene(&scene);
         let classes = ClassMap::from_scene(&scene);
         let ctx = FrameContext::new(&model, &scene);
