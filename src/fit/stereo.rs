@@ -128,15 +128,12 @@ pub fn triangulate(
     intrinsics: &[Intrinsics],
     m: &StereoMatch,
 ) -> Option<StereoPoint> {
-    let c0 = cameras.first()?;
-    let cm = cameras.get(m.view)?;
-    let ray_of = |cam: &Camera, intr: &Intrinsics, px: DVec2| {
-        let n = intr.unproject(px);
-        let dir = cam.extrinsics.rotation.transpose() * DVec3::new(n.x, n.y, 1.0).normalize();
-        (cam.extrinsics.center_mm(), dir)
-    };
-    let (o0, d0) = ray_of(c0, intrinsics.first()?, m.pixel_ref);
-    let (om, dm) = ray_of(cm, intrinsics.get(m.view)?, m.pixel_other);
+    let (o0, d0) = cameras
+        .first()?
+        .pixel_ray_with(intrinsics.first()?, m.pixel_ref);
+    let (om, dm) = cameras
+        .get(m.view)?
+        .pixel_ray_with(intrinsics.get(m.view)?, m.pixel_other);
     // Minimise |o0 + s d0 − (om + u dm)|² over s and u.
     let w = o0 - om;
     let (a, b, c) = (d0.dot(d0), d0.dot(dm), dm.dot(dm));
@@ -222,10 +219,14 @@ fn match_point(
     depth_mm: f64,
     params: &StereoParams,
 ) -> Option<(DVec2, f64)> {
-    let n = pair.intrinsics.0.unproject(pixel);
-    let dir = DVec3::new(n.x, n.y, 1.0).normalize();
-    let t0 = depth_mm / dir.z;
-    let project = |t: f64| pair.intrinsics.1.project(pair.cameras.1.to_camera(dir * t));
+    let (origin, dir) = pair.cameras.0.pixel_ray_with(pair.intrinsics.0, pixel);
+    // `depth_mm` is along camera 0's own axis.
+    let t0 = depth_mm / (pair.cameras.0.extrinsics.rotation * dir).z;
+    let project = |t: f64| {
+        pair.intrinsics
+            .1
+            .project(pair.cameras.1.to_camera(origin + dir * t))
+    };
     let (q0, q1) = (project(t0)?, project(t0 * 1.001)?);
     // Partner pixels per mm along the ray, and the epipolar direction.
     let px_per_mm = (q1 - q0).length() / (t0 * 0.001);

@@ -235,7 +235,12 @@ impl Camera {
 
     /// Unit ray direction (camera-0 coordinates) and origin through a pixel.
     pub fn pixel_ray(&self, pixel: DVec2) -> (DVec3, DVec3) {
-        let n = self.intrinsics.unproject(pixel);
+        self.pixel_ray_with(&self.intrinsics, pixel)
+    }
+
+    /// [`Camera::pixel_ray`] under other intrinsics (those a fit is correcting).
+    pub fn pixel_ray_with(&self, intrinsics: &Intrinsics, pixel: DVec2) -> (DVec3, DVec3) {
+        let n = intrinsics.unproject(pixel);
         let dir_cam = DVec3::new(n.x, n.y, 1.0).normalize();
         let rt = self.extrinsics.rotation.transpose();
         (self.extrinsics.center_mm(), rt * dir_cam)
