@@ -6,7 +6,7 @@ use egui::{Event, Modifiers, PointerButton, Pos2, vec2};
 use egui_kittest::Harness;
 use endofuse::app::actions::Action;
 use endofuse::app::{Dialogs, EndofuseApp, Tool};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 mod common;
 
@@ -31,7 +31,8 @@ impl Dialogs for Scripted {
 }
 
 fn scratch() -> PathBuf {
-    let d = std::env::temp_dir().join(format!("endofuse-app-session-{}", std::process::id()));
+    let d = Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("endofuse-app-session-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).unwrap();
     d

@@ -22,8 +22,8 @@ fn harness() -> Harness<'static, EndofuseApp> {
         .wgpu()
         .build_eframe(|cc| {
             let mut app = EndofuseApp::new(cc, "demo", Box::new(NoDialogs));
-            let dir =
-                std::env::temp_dir().join(format!("endofuse-app-test-{}", std::process::id()));
+            let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
+                .join(format!("endofuse-app-test-{}", std::process::id()));
             let _ = std::fs::remove_dir_all(&dir);
             app.autosave_dir = Some(dir);
             app

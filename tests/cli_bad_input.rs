@@ -256,7 +256,8 @@ fn bad_meshes() {
 
 #[test]
 fn bad_synth_options_are_refused() {
-    let out = std::env::temp_dir().join(format!("endofuse-bad-synth-{}", std::process::id()));
+    let out = Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("endofuse-bad-synth-{}", std::process::id()));
     let run = Command::new(env!("CARGO_BIN_EXE_endofuse"))
         .args(["synth", "--frames", "0", "--out"])
         .arg(&out)
