@@ -4,6 +4,7 @@
 pub mod energy;
 pub mod init;
 pub mod model;
+pub mod motion;
 pub mod optimizer;
 pub mod probability;
 pub mod profile;

@@ -19,9 +19,6 @@ use std::sync::atomic::{AtomicBool, Ordering};
 /// Shape damping while the cameras are corrected: a zoom must not be explained as growth.
 const ZOOM_SHAPE_DAMPING: f64 = 2.0;
 
-/// How firmly (relative to the data) the cameras' intrinsics change together.
-const CAMERA_COUPLING: f64 = 100.0;
-
 /// The paper's settings: rigid, affine, affine + shape, affine + shape + cameras.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum Mode {
@@ -264,6 +261,24 @@ pub fn step(
         }
     }
     let b_data = b.clone();
+    // A rig zooms as one: its cameras' intrinsics change by one shared increment, solved
+    // for from the per-camera equations (Table III). Per camera, a relative shift of the
+    // principal points fakes a change of disparity; the stereo term's curvature along it then
+    // set the damping of every intrinsic, and the principal points stayed where calibration
+    // left them while the pose slid sideways (10 px behind the zoom; now within 3).
+    let rig = match block {
+        Block::Cameras(m) if m > 1 => Some(shared_camera_increment(m)),
+        _ => None,
+    };
+    let (mut h, mut b, b_data, n) = match &rig {
+        Some(p) => (
+            p.transpose() * &h * p,
+            p.transpose() * &b,
+            p.transpose() * &b_data,
+            5,
+        ),
+        None => (h, b, b_data, n),
+    };
     let max_diag = (0..n).map(|k| h[(k, k)]).fold(0.0, f64::max).max(1e-9);
     for k in 0..n {
         h[(k, k)] += params.lm * h[(k, k)] + 1e-6 * max_diag;
@@ -338,44 +353,19 @@ pub fn step(
                     + lam * (state.shape[k] - prev.shape.get(k).copied().unwrap_or(0.0));
             }
         }
-        Block::Cameras(cameras) => {
-            // Tikhonov towards the previous frame's intrinsics. k1 is held far harder: zoom
-            // barely moves distortion (paper §IV-A), and a free k1 mimics a focal change.
+        Block::Cameras(_) => {
+            // Tikhonov towards the previous frame's intrinsics (the rig's shared increment:
+            // camera 0's change stands for all). k1 is held far harder: zoom barely moves
+            // distortion (paper §IV-A), and a free k1 mimics a focal change.
             const RELATIVE: [f64; 5] = [1.0, 1.0, 1.0, 1.0, 100.0];
-            let change = |m: usize| -> [f64; 5] {
-                let (cur, old) = (
-                    state.intrinsics[m].corrected(),
-                    prev.intrinsics[m].corrected(),
-                );
-                std::array::from_fn(|k| cur[k] - old[k])
-            };
-            let diag: Vec<f64> = (0..5 * cameras).map(|i| h[(i, i)]).collect();
-            for m in 0..cameras {
-                let dm = change(m);
-                for k in 0..5 {
-                    let i = 5 * m + k;
-                    let lam = params.camera_damping * RELATIVE[k] * diag[i];
-                    h[(i, i)] += lam;
-                    b[i] -= lam * dm[k];
-                }
-            }
-            // The cameras of a rig zoom together: their changes differ only where the data
-            // insist. Free, a relative shift of the principal points fakes a change of
-            // disparity, and the stereo depth then follows an outdated focal length.
-            let d0 = change(0);
-            for m in 1..cameras {
-                let dm = change(m);
-                for k in 0..5 {
-                    let (i, j) = (5 * m + k, k);
-                    let lam = CAMERA_COUPLING * 0.5 * (diag[i] + diag[j]);
-                    let gap = dm[k] - d0[k];
-                    h[(i, i)] += lam;
-                    h[(j, j)] += lam;
-                    h[(i, j)] -= lam;
-                    h[(j, i)] -= lam;
-                    b[i] -= lam * gap;
-                    b[j] += lam * gap;
-                }
+            let (cur, old) = (
+                state.intrinsics[0].corrected(),
+                prev.intrinsics[0].corrected(),
+            );
+            for k in 0..5 {
+                let lam = params.camera_damping * RELATIVE[k] * h[(k, k)];
+                h[(k, k)] += lam;
+                b[k] -= lam * (cur[k] - old[k]);
             }
         }
         _ => {}
@@ -401,7 +391,11 @@ pub fn step(
         }
         let mut scale = 1.0;
         for _ in 0..tries {
-            let scaled: Vec<f64> = delta.iter().map(|d| d * scale).collect();
+            let full = match &rig {
+                Some(p) => p * delta,
+                None => delta.clone(),
+            };
+            let scaled: Vec<f64> = full.iter().map(|d| d * scale).collect();
             let mut next = apply_increment(state, block, &scaled, centre);
             ctx.model.shape.pca.clamp_weights(&mut next.shape);
             if objective(&next) < before {
@@ -419,8 +413,18 @@ pub fn step(
     // Newton step on the energy itself: H is positive definite, so −H⁻¹∇E descends.
     let gradient = DVector::from_vec(ctx.gradient(lines, state, block, ep))
         + DVector::from_vec(stereo.gradient(ctx, state, &deformed, block));
+    let gradient = match &rig {
+        Some(p) => p.transpose() * gradient,
+        None => gradient,
+    };
     let prior = &b - &b_data;
     try_step(&cholesky.solve(&(prior - gradient)), 5)
+}
+
+/// ∂(all cameras' intrinsics)/∂(shared increment): 5·cameras × 5, each camera's five
+/// parameters moving by the rig's one increment.
+fn shared_camera_increment(cameras: usize) -> DMatrix<f64> {
+    DMatrix::from_fn(5 * cameras, 5, |r, c| if r % 5 == c { 1.0 } else { 0.0 })
 }
 
 /// The priors' energy in the same units the step's normal equations use.

@@ -240,6 +240,9 @@ pub fn track(
     let model = Model::from_scene(scene);
     let classes = ClassMap::from_scene(scene);
     let mut good = start;
+    let mut good_frame = options.frames.0;
+    // Poses of frames fitted with fixed intrinsics: their motion carries the pose through a zoom.
+    let mut motion = super::motion::MotionHistory::default();
     let mut first = true;
     let mut lost_run = 0usize;
     let ctx = FrameContext::new(&model, scene);
@@ -262,10 +265,20 @@ pub fn track(
         let params = if first { &options.first } else { &options.next };
         let correct_cameras = options.mode == Mode::LSC
             && (0..=ZOOM_SETTLE_FRAMES).any(|k| t >= k && scene.in_zoom_change(t - k));
+        // During a zoom the pose is started and held where its motion before the zoom
+        // carries it (see `motion`); elsewhere where the last good frame left it.
+        let anchor = if correct_cameras {
+            FitState {
+                affine: motion.predict(&good.affine, t.saturating_sub(good_frame) as f64),
+                ..good.clone()
+            }
+        } else {
+            good.clone()
+        };
         let mut fit = fit_frame(
             &ctx,
-            &good,
-            &good,
+            &anchor,
+            &anchor,
             &mut views,
             appearance,
             params,
@@ -307,9 +320,15 @@ pub fn track(
         } else {
             fit.state.clone()
         };
-        if !lost {
+        if lost {
+            motion.clear();
+        } else {
             good = fit.state.clone();
+            good_frame = t;
             first = false;
+            if !correct_cameras {
+                motion.push(t, good.affine);
+            }
         }
         let ms = started.elapsed().as_secs_f64() * 1e3;
         let Rendered {
