@@ -232,6 +232,51 @@ fn a_zoom_is_followed_by_focal_length_and_principal_point() {
         .as_f64()
         .unwrap();
     assert!(hidden < 3.5, "hidden tumour {hidden} mm");
+
+    // The same zoom, unmarked: the tracker detects it (without, fx ends 20 % off: mean 7 %).
+    let scene_json = scene.join("scene.json");
+    let mut doc = json(&scene_json);
+    doc.as_object_mut().unwrap().remove("zoom_changes");
+    std::fs::write(&scene_json, serde_json::to_string_pretty(&doc).unwrap()).unwrap();
+    let out = tmp("zoom-unmarked-out");
+    let run = track(&scene, &out, &["--mode", "LSC"]);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let m = json(&out.join("metrics.json"));
+    assert!(
+        m["camera"]["fx_rel_error_mean"].as_f64().unwrap() < 0.03,
+        "{m}"
+    );
+    assert!(m["dice"]["mean"].as_f64().unwrap() > 0.92, "{m}");
+    let _ = std::fs::remove_dir_all(&out);
+    let _ = std::fs::remove_dir_all(&scene);
+}
+
+/// LSC on a scene without zoom: the detector stays quiet and the intrinsics keep their
+/// calibration exactly.
+#[test]
+fn without_a_zoom_lsc_keeps_the_calibration() {
+    let scene = synth("nozoom-lsc", &[]);
+    let out = tmp("nozoom-lsc-out");
+    let run = track(&scene, &out, &["--mode", "LSC"]);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let fitted = json(&out.join("trajectory.json"));
+    let truth = json(&scene.join("gt/trajectory.json"));
+    for (f, g) in fitted["frames"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip(truth["frames"].as_array().unwrap())
+    {
+        assert_eq!(f["cameras"], g["cameras"], "frame {}", f["frame"]);
+    }
     let _ = std::fs::remove_dir_all(&out);
     let _ = std::fs::remove_dir_all(&scene);
 }

@@ -10,6 +10,7 @@ pub mod probability;
 pub mod profile;
 pub mod stereo;
 pub mod tracker;
+pub mod zoom;
 
 pub use energy::{Block, EnergyParams, FitState, FrameContext};
 pub use model::Model;

@@ -32,6 +32,13 @@ impl MotionHistory {
         }
     }
 
+    /// Drops the `n` latest poses (they may hold the onset of a zoom taken for motion).
+    pub fn forget_latest(&mut self, n: usize) {
+        for _ in 0..n {
+            self.poses.pop_back();
+        }
+    }
+
     /// Forgets the motion (after a loss of tracking, it no longer says where the organ goes).
     pub fn clear(&mut self) {
         self.poses.clear();

@@ -27,6 +27,9 @@ pub const ZOOM_SETTLE_FRAMES: usize = 1;
 /// 0.914 / 0.941 / 0.938 at 1, 0.933 / 0.969 / 0.946 at 0.3, 0.936 / 0.970 / 0.947 at 0.1, and
 /// no better at 0.03.
 pub const ZOOM_POSE_DAMPING_WITHOUT_CAMERAS: f64 = 0.1;
+/// Tracked frames before a detected zoom that are not trusted for the pose's motion: a zoom
+/// starts slowly, and its first frames stay under the detector's threshold.
+const ZOOM_ONSET_FRAMES: usize = 2;
 /// After this many lost frames in a row (and every as many after), try placing the model
 /// afresh.
 pub const REINIT_AFTER_LOST: usize = 3;
@@ -248,6 +251,7 @@ pub fn track(
     let mut good_frame = options.frames.0;
     // Poses of frames fitted with fixed intrinsics: their motion carries the pose through a zoom.
     let mut motion = super::motion::MotionHistory::default();
+    let mut zoom = super::zoom::ZoomDetector::default();
     let mut first = true;
     let mut lost_run = 0usize;
     let ctx = FrameContext::new(&model, scene);
@@ -269,7 +273,10 @@ pub fn track(
             });
         let params = if first { &options.first } else { &options.next };
         let in_zoom = (0..=ZOOM_SETTLE_FRAMES).any(|k| t >= k && scene.in_zoom_change(t - k));
-        let correct_cameras = options.mode == Mode::LSC && in_zoom;
+        if in_zoom {
+            zoom.reset();
+        }
+        let mut correct_cameras = options.mode == Mode::LSC && (in_zoom || zoom.active());
         // Without camera correction (R, L, LS) the pose is all that can follow a zoom: it
         // must move as fast as the image changes.
         let zoom_params;
@@ -284,11 +291,12 @@ pub fn track(
         };
         // During a zoom the pose is started and held where its motion before the zoom
         // carries it (see `motion`); elsewhere where the last good frame left it.
+        let carried = |motion: &super::motion::MotionHistory| FitState {
+            affine: motion.predict(&good.affine, t.saturating_sub(good_frame) as f64),
+            ..good.clone()
+        };
         let anchor = if correct_cameras {
-            FitState {
-                affine: motion.predict(&good.affine, t.saturating_sub(good_frame) as f64),
-                ..good.clone()
-            }
+            carried(&motion)
         } else {
             good.clone()
         };
@@ -304,6 +312,29 @@ pub fn track(
         if cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
             // A fit cut short is not a result.
             return Err(Error::Cancelled);
+        }
+        // A zoom the scene does not mark (LSC): the frame's apparent size jumped with the
+        // intrinsics fixed. Fit it again with them free, from where the motion carries the pose.
+        if options.mode == Mode::LSC
+            && !correct_cameras
+            && !first
+            && !is_lost(&fit)
+            && zoom.fires(
+                &good,
+                &fit.state,
+                ctx.model_centre(&model.deformed(&good.shape)),
+            )
+        {
+            // The frames just before held the zoom's onset, taken for motion.
+            motion.forget_latest(ZOOM_ONSET_FRAMES);
+            let anchor = carried(&motion);
+            fit = fit_frame(&ctx, &anchor, &anchor, &mut views, appearance, params, true);
+            correct_cameras = true;
+            if cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
+                return Err(Error::Cancelled);
+            }
+        } else if correct_cameras && !in_zoom && !is_lost(&fit) {
+            zoom.corrected(&good, &fit.state);
         }
         let mut lost = is_lost(&fit);
         lost_run = if lost { lost_run + 1 } else { 0 };
@@ -339,6 +370,7 @@ pub fn track(
         };
         if lost {
             motion.clear();
+            zoom.reset();
         } else {
             good = fit.state.clone();
             good_frame = t;

@@ -1,0 +1,118 @@
+//! Zoom detection for LSC where the scene marks no zoom change (CONTRACT §1: camera correction
+//! "may switch itself on … where the tracker detects one").
+//!
+//! With the intrinsics fixed, a zoom can only be explained by the organ growing or coming
+//! closer: its apparent size (the affine's scale × fx / depth of its centre) then changes by
+//! percents a frame. Breathing and drift change it by a few tenths of a percent a frame at
+//! video rate (measured on phantoms without zoom: at most 0.3 %), and a surgeon pushing the
+//! organ rarely faster, so a change above [`ZOOM_RATE`] switches camera correction on. It
+//! stays on until the fitted focal length holds still for [`CALM_FRAMES`] frames.
+
+use super::energy::FitState;
+use glam::DVec3;
+
+/// Apparent-size change per frame above which the intrinsics are taken to be changing.
+pub const ZOOM_RATE: f64 = 0.008;
+/// Focal-length change per frame below which a frame counts as calm.
+pub const CALM_RATE: f64 = 0.0025;
+/// Calm frames in a row that end a detected zoom.
+pub const CALM_FRAMES: usize = 2;
+
+/// Apparent size of the organ whose preoperative centre is `centre` under `state`:
+/// cbrt|det A| · fx / z, in pixels per millimetre.
+pub fn apparent_size(state: &FitState, centre: DVec3) -> Option<f64> {
+    let z = state.affine.apply(centre).z;
+    let fx = state.intrinsics.first()?.fx;
+    let scale = state.affine.linear().determinant().abs().cbrt();
+    (z > 0.0 && scale.is_finite()).then(|| scale * fx / z)
+}
+
+/// Whether the tracker believes the intrinsics are changing.
+#[derive(Debug, Clone, Default)]
+pub struct ZoomDetector {
+    active: bool,
+    calm: usize,
+}
+
+impl ZoomDetector {
+    pub fn active(&self) -> bool {
+        self.active
+    }
+
+    /// A frame fitted with fixed intrinsics, from `before` (the last good state) to `after`:
+    /// true when its apparent size changed fast enough to be a zoom (correction turns on).
+    pub fn fires(&mut self, before: &FitState, after: &FitState, centre: DVec3) -> bool {
+        let (Some(a), Some(b)) = (apparent_size(before, centre), apparent_size(after, centre))
+        else {
+            return false;
+        };
+        if (b / a - 1.0).abs() > ZOOM_RATE {
+            self.active = true;
+            self.calm = 0;
+        }
+        self.active
+    }
+
+    /// A frame fitted with camera correction while a detected zoom is on: the zoom ends after
+    /// [`CALM_FRAMES`] frames whose focal length barely moved.
+    pub fn corrected(&mut self, before: &FitState, after: &FitState) {
+        let (Some(a), Some(b)) = (before.intrinsics.first(), after.intrinsics.first()) else {
+            return;
+        };
+        if (b.fx / a.fx - 1.0).abs() < CALM_RATE {
+            self.calm += 1;
+            if self.calm >= CALM_FRAMES {
+                self.active = false;
+                self.calm = 0;
+            }
+        } else {
+            self.calm = 0;
+        }
+    }
+
+    /// Forgets a zoom in progress (tracking lost, or a marked zoom change takes over).
+    pub fn reset(&mut self) {
+        self.active = false;
+        self.calm = 0;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::{Affine, Intrinsics};
+
+    fn state(z_mm: f64, fx: f64) -> FitState {
+        FitState {
+            affine: Affine::from_linear_translation(glam::DMat3::IDENTITY, DVec3::Z * z_mm),
+            shape: Vec::new(),
+            intrinsics: vec![Intrinsics {
+                fx,
+                fy: fx,
+                cx: 480.0,
+                cy: 270.0,
+                k1: 0.0,
+                k2: 0.0,
+                p1: 0.0,
+                p2: 0.0,
+            }],
+        }
+    }
+
+    #[test]
+    fn breathing_does_not_fire_and_a_zoom_does_until_the_optics_settle() {
+        let mut d = ZoomDetector::default();
+        // 0.3 mm closer at 190 mm: breathing.
+        assert!(!d.fires(&state(190.0, 1000.0), &state(189.7, 1000.0), DVec3::ZERO));
+        // Fixed intrinsics, the organ "comes" 2 % closer in one frame: a zoom.
+        assert!(d.fires(&state(190.0, 1000.0), &state(186.2, 1000.0), DVec3::ZERO));
+        assert!(d.active());
+        // While correcting, fx still moving keeps it on; two calm frames end it.
+        d.corrected(&state(190.0, 1000.0), &state(190.0, 1020.0));
+        assert!(d.active());
+        d.corrected(&state(190.0, 1020.0), &state(190.0, 1021.0));
+        assert!(d.active());
+        d.corrected(&state(190.0, 1021.0), &state(190.0, 1021.5));
+        assert!(!d.active());
+    }
+}
