@@ -3,16 +3,20 @@
 //!
 //! With the intrinsics fixed, a zoom can only be explained by the organ growing or coming
 //! closer: its apparent size (the affine's scale × fx / depth of its centre) then changes by
-//! percents a frame. Breathing and drift change it by a few tenths of a percent a frame at
-//! video rate (measured on phantoms without zoom: at most 0.3 %), and a surgeon pushing the
-//! organ rarely faster, so a change above [`ZOOM_RATE`] switches camera correction on. It
-//! stays on until the fitted focal length holds still for [`CALM_FRAMES`] frames.
+//! percents a frame, frame after frame in one direction. Breathing and drift change it by a
+//! few tenths of a percent a frame at video rate, and fit jitter (tools crossing the rim) by
+//! up to ±1 % but back and forth (measured on phantoms without zoom). So camera correction
+//! switches on when two frames in a row grow (or shrink) by [`ZOOM_RATE_TWO_FRAMES`] together,
+//! or one frame by [`ZOOM_RATE_ONE_FRAME`], and stays on until the fitted focal length holds
+//! still for [`CALM_FRAMES`] frames.
 
 use super::energy::FitState;
 use glam::DVec3;
 
-/// Apparent-size change per frame above which the intrinsics are taken to be changing.
-pub const ZOOM_RATE: f64 = 0.008;
+/// Apparent-size change over two frames changing the same way that counts as a zoom.
+pub const ZOOM_RATE_TWO_FRAMES: f64 = 0.015;
+/// Apparent-size change in a single frame that counts as a zoom.
+pub const ZOOM_RATE_ONE_FRAME: f64 = 0.025;
 /// Focal-length change per frame below which a frame counts as calm.
 pub const CALM_RATE: f64 = 0.0025;
 /// Calm frames in a row that end a detected zoom.
@@ -32,6 +36,8 @@ pub fn apparent_size(state: &FitState, centre: DVec3) -> Option<f64> {
 pub struct ZoomDetector {
     active: bool,
     calm: usize,
+    /// The previous fixed-intrinsics frame's relative change of apparent size.
+    last_change: Option<f64>,
 }
 
 impl ZoomDetector {
@@ -46,9 +52,15 @@ impl ZoomDetector {
         else {
             return false;
         };
-        if (b / a - 1.0).abs() > ZOOM_RATE {
+        let change = b / a - 1.0;
+        let sustained = self
+            .last_change
+            .is_some_and(|c| c * change > 0.0 && (c + change).abs() > ZOOM_RATE_TWO_FRAMES);
+        self.last_change = Some(change);
+        if sustained || change.abs() > ZOOM_RATE_ONE_FRAME {
             self.active = true;
             self.calm = 0;
+            self.last_change = None;
         }
         self.active
     }
@@ -72,8 +84,7 @@ impl ZoomDetector {
 
     /// Forgets a zoom in progress (tracking lost, or a marked zoom change takes over).
     pub fn reset(&mut self) {
-        self.active = false;
-        self.calm = 0;
+        *self = Self::default();
     }
 }
 
@@ -100,12 +111,21 @@ mod tests {
     }
 
     #[test]
-    fn breathing_does_not_fire_and_a_zoom_does_until_the_optics_settle() {
+    fn breathing_and_jitter_do_not_fire_and_a_zoom_does_until_the_optics_settle() {
         let mut d = ZoomDetector::default();
+        let fires = |d: &mut ZoomDetector, z0: f64, z1: f64| {
+            d.fires(&state(z0, 1000.0), &state(z1, 1000.0), DVec3::ZERO)
+        };
         // 0.3 mm closer at 190 mm: breathing.
-        assert!(!d.fires(&state(190.0, 1000.0), &state(189.7, 1000.0), DVec3::ZERO));
-        // Fixed intrinsics, the organ "comes" 2 % closer in one frame: a zoom.
-        assert!(d.fires(&state(190.0, 1000.0), &state(186.2, 1000.0), DVec3::ZERO));
+        assert!(!fires(&mut d, 190.0, 189.7));
+        // ±1 % back and forth: jitter.
+        assert!(!fires(&mut d, 190.0, 188.1));
+        assert!(!fires(&mut d, 188.1, 190.0));
+        assert!(!fires(&mut d, 190.0, 188.1));
+        assert!(!fires(&mut d, 188.1, 190.0));
+        // The organ "comes" 0.6 % closer, then 1.1 %: with the intrinsics fixed, a zoom.
+        assert!(!fires(&mut d, 190.0, 188.9));
+        assert!(fires(&mut d, 188.9, 186.8));
         assert!(d.active());
         // While correcting, fx still moving keeps it on; two calm frames end it.
         d.corrected(&state(190.0, 1000.0), &state(190.0, 1020.0));
@@ -114,5 +134,7 @@ mod tests {
         assert!(d.active());
         d.corrected(&state(190.0, 1021.0), &state(190.0, 1021.5));
         assert!(!d.active());
+        // A fast zoom fires in one frame.
+        assert!(fires(&mut d, 190.0, 184.0));
     }
 }
