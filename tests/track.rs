@@ -41,16 +41,29 @@ fn track(scene: &Path, out: &Path, args: &[&str]) -> std::process::Output {
 
 use common::read_json as json;
 
-#[test]
-fn track_writes_the_contract_outputs_and_segments_the_phantom() {
-    let scene = synth("ls", &[]);
-    let out = tmp("ls-out");
-    let run = track(&scene, &out, &["--mode", "LS", "--frames", "0..5"]);
+/// Runs `track` and insists that it succeeded.
+fn track_ok(scene: &Path, out: &Path, args: &[&str]) {
+    let run = track(scene, out, args);
     assert!(
         run.status.success(),
         "{}",
         String::from_utf8_lossy(&run.stderr)
     );
+}
+
+/// Takes `key` out of the scene's scene.json.
+fn drop_scene_key(scene: &Path, key: &str) {
+    let p = scene.join("scene.json");
+    let mut v = json(&p);
+    v.as_object_mut().unwrap().remove(key);
+    std::fs::write(&p, serde_json::to_string_pretty(&v).unwrap()).unwrap();
+}
+
+#[test]
+fn track_writes_the_contract_outputs_and_segments_the_phantom() {
+    let scene = synth("ls", &[]);
+    let out = tmp("ls-out");
+    track_ok(&scene, &out, &["--mode", "LS", "--frames", "0..5"]);
     for cam in ["left", "right"] {
         let mask = image::open(out.join(format!("masks/{cam}/000005.png"))).unwrap();
         assert_eq!((mask.width(), mask.height()), (320, 180));
@@ -111,17 +124,9 @@ fn track_writes_the_contract_outputs_and_segments_the_phantom() {
 #[test]
 fn without_an_initial_pose_the_model_is_placed_automatically() {
     let scene = synth("auto", &[]);
-    let p = scene.join("scene.json");
-    let mut v = json(&p);
-    v.as_object_mut().unwrap().remove("initial_pose");
-    std::fs::write(&p, serde_json::to_string(&v).unwrap()).unwrap();
+    drop_scene_key(&scene, "initial_pose");
     let out = tmp("auto-out");
-    let run = track(&scene, &out, &["--frames", "0..2"]);
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
+    track_ok(&scene, &out, &["--frames", "0..2"]);
     let m = json(&out.join("metrics.json"));
     assert!(
         m["dice"]["by_structure"]["kidney"].as_f64().unwrap() > 0.85,
@@ -159,12 +164,7 @@ fn frames_without_the_organ_are_lost_and_tracking_recovers() {
         }
     }
     let out = tmp("lost-out");
-    let run = track(&scene, &out, &["--frames", "0..5"]);
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
+    track_ok(&scene, &out, &["--frames", "0..5"]);
     let traj = json(&out.join("trajectory.json"));
     let lost: Vec<bool> = traj["frames"]
         .as_array()
@@ -206,12 +206,7 @@ fn a_zoom_is_followed_by_focal_length_and_principal_point() {
         ],
     );
     let out = tmp("zoom-out");
-    let run = track(&scene, &out, &["--mode", "LSC"]);
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
+    track_ok(&scene, &out, &["--mode", "LSC"]);
     let m = json(&out.join("metrics.json"));
     let cam = &m["camera"];
     assert!(cam["fx_rel_error_mean"].as_f64().unwrap() < 0.02, "{m}");
@@ -234,17 +229,9 @@ fn a_zoom_is_followed_by_focal_length_and_principal_point() {
     assert!(hidden < 3.5, "hidden tumour {hidden} mm");
 
     // The same zoom, unmarked: the tracker detects it (without, fx ends 20 % off: mean 7 %).
-    let scene_json = scene.join("scene.json");
-    let mut doc = json(&scene_json);
-    doc.as_object_mut().unwrap().remove("zoom_changes");
-    std::fs::write(&scene_json, serde_json::to_string_pretty(&doc).unwrap()).unwrap();
+    drop_scene_key(&scene, "zoom_changes");
     let out = tmp("zoom-unmarked-out");
-    let run = track(&scene, &out, &["--mode", "LSC"]);
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
+    track_ok(&scene, &out, &["--mode", "LSC"]);
     let m = json(&out.join("metrics.json"));
     assert!(
         m["camera"]["fx_rel_error_mean"].as_f64().unwrap() < 0.03,
@@ -261,12 +248,7 @@ fn a_zoom_is_followed_by_focal_length_and_principal_point() {
 fn without_a_zoom_lsc_keeps_the_calibration() {
     let scene = synth("nozoom-lsc", &[]);
     let out = tmp("nozoom-lsc-out");
-    let run = track(&scene, &out, &["--mode", "LSC"]);
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
+    track_ok(&scene, &out, &["--mode", "LSC"]);
     let fitted = json(&out.join("trajectory.json"));
     let truth = json(&scene.join("gt/trajectory.json"));
     for (f, g) in fitted["frames"]
@@ -286,15 +268,10 @@ fn without_a_zoom_lsc_keeps_the_calibration() {
 #[test]
 fn tracking_overlay_picture() {
     let out = tmp("picture");
-    let run = track(
+    track_ok(
         Path::new("demo"),
         &out,
         &["--mode", "LSC", "--frames", "0..9"],
-    );
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
     );
     let scene = endofuse::Scene::open("demo", endofuse::scene::FrameCheck::Headers).unwrap();
     let index = |l: u8| scene.structures.iter().position(|s| s.label == l);
