@@ -315,9 +315,12 @@ pub fn track(
         }
         // A zoom the scene does not mark (LSC): the frame's apparent size jumped with the
         // intrinsics fixed. Fit it again with them free, from where the motion carries the pose.
+        // Only against the frame just before: after lost frames the organ may simply be
+        // elsewhere, and a lost stretch must not turn into a change of intrinsics.
         if options.mode == Mode::LSC
             && !correct_cameras
             && !first
+            && good_frame + 1 == t
             && !is_lost(&fit)
             && zoom.fires(
                 &good,
