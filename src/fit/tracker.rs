@@ -5,8 +5,10 @@
 
 use super::energy::{FitState, FrameContext};
 use super::model::Model;
-use super::optimizer::{FitParams, Mode, fit_frame};
+use super::motion::MotionHistory;
+use super::optimizer::{FitParams, FrameFit, Mode, fit_frame};
 use super::probability::ViewProbabilities;
+use super::zoom::ZoomDetector;
 use crate::appearance::{Appearance, ClassMap};
 use crate::error::Error;
 use crate::geometry::{Affine, Camera};
@@ -236,47 +238,85 @@ pub fn initial_state(scene: &Scene, model: &Model, affine: Affine) -> FitState {
     }
 }
 
-/// Tracks `options.frames` from `start`, handing each frame to `on_frame` as it finishes.
-pub fn track(
-    scene: &Scene,
-    appearance: &Appearance,
-    start: FitState,
-    options: &TrackOptions,
-    cancel: Option<&AtomicBool>,
-    on_frame: &mut dyn FnMut(TrackedFrame) -> Result<(), Error>,
-) -> Result<(), Error> {
-    let model = Model::from_scene(scene);
-    let classes = ClassMap::from_scene(scene);
-    let mut good = start;
-    let mut good_frame = options.frames.0;
-    // Poses of frames fitted with fixed intrinsics: their motion carries the pose through a zoom.
-    let mut motion = super::motion::MotionHistory::default();
-    let mut zoom = super::zoom::ZoomDetector::default();
-    let mut first = true;
-    let mut lost_run = 0usize;
-    let ctx = FrameContext::new(&model, scene);
-    for t in options.frames.0..=options.frames.1 {
-        if cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
-            return Err(Error::Cancelled);
+/// What tracking carries from one frame to the next, and how it fits the next one.
+struct FrameTracker<'a> {
+    ctx: FrameContext<'a>,
+    scene: &'a Scene,
+    appearance: &'a Appearance,
+    options: &'a TrackOptions,
+    cancel: Option<&'a AtomicBool>,
+    /// The last frame that was not lost, and its number.
+    good: FitState,
+    good_frame: usize,
+    first: bool,
+    lost_run: usize,
+    /// Poses of frames fitted with fixed intrinsics: their motion carries the pose through a
+    /// zoom.
+    motion: MotionHistory,
+    zoom: ZoomDetector,
+}
+
+/// One frame's fit and what the tracker made of it.
+struct Outcome {
+    fit: FrameFit,
+    /// The fit's state, or the last good one where the frame is lost.
+    state: FitState,
+    lost: bool,
+}
+
+impl<'a> FrameTracker<'a> {
+    /// Err(Cancelled) once the user cancelled: a fit cut short is not a result.
+    fn cancelled(&self) -> Result<(), Error> {
+        if self.cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
+            Err(Error::Cancelled)
+        } else {
+            Ok(())
         }
-        let frames: Vec<_> = (0..scene.cameras.len())
-            .map(|c| scene.frame(c, t))
-            .collect::<Result<_, _>>()?;
-        let started = std::time::Instant::now();
-        let levels = fit_level(scene.cameras[0].width) + 3;
-        let mut views: Vec<ViewProbabilities> =
-            super::profile::time(super::profile::Phase::Pyramid, || {
-                frames
-                    .into_iter()
-                    .map(|f| ViewProbabilities::new(f, levels, classes.len()))
-                    .collect()
-            });
-        let params = if first { &options.first } else { &options.next };
-        let in_zoom = (0..=ZOOM_SETTLE_FRAMES).any(|k| t >= k && scene.in_zoom_change(t - k));
+    }
+
+    /// The last good state with its pose carried on to frame `t` by the motion before it: where
+    /// a zoom holds the pose (zooming in and coming closer look alike within a frame).
+    fn carried(&self, t: usize) -> FitState {
+        FitState {
+            affine: self
+                .motion
+                .predict(&self.good.affine, t.saturating_sub(self.good_frame) as f64),
+            ..self.good.clone()
+        }
+    }
+
+    fn fit(
+        &self,
+        views: &mut [ViewProbabilities],
+        anchor: &FitState,
+        params: &FitParams,
+        correct_cameras: bool,
+    ) -> FrameFit {
+        fit_frame(
+            &self.ctx,
+            anchor,
+            anchor,
+            views,
+            self.appearance,
+            params,
+            correct_cameras,
+        )
+    }
+
+    /// Fits frame `t`: camera correction inside marked (or detected) zooms, a fresh placement
+    /// after a lost stretch, and the bookkeeping of what the next frame starts from.
+    fn frame(&mut self, t: usize, views: &mut [ViewProbabilities]) -> Result<Outcome, Error> {
+        let options = self.options;
+        let params = if self.first {
+            &options.first
+        } else {
+            &options.next
+        };
+        let in_zoom = (0..=ZOOM_SETTLE_FRAMES).any(|k| t >= k && self.scene.in_zoom_change(t - k));
         if in_zoom {
-            zoom.reset();
+            self.zoom.reset();
         }
-        let mut correct_cameras = options.mode == Mode::LSC && (in_zoom || zoom.active());
+        let mut correct_cameras = options.mode == Mode::LSC && (in_zoom || self.zoom.active());
         // Without camera correction (R, L, LS) the pose is all that can follow a zoom: it
         // must move as fast as the image changes.
         let zoom_params;
@@ -289,99 +329,127 @@ pub fn track(
         } else {
             params
         };
-        // During a zoom the pose is started and held where its motion before the zoom
-        // carries it (see `motion`); elsewhere where the last good frame left it.
-        let carried = |motion: &super::motion::MotionHistory| FitState {
-            affine: motion.predict(&good.affine, t.saturating_sub(good_frame) as f64),
-            ..good.clone()
-        };
         let anchor = if correct_cameras {
-            carried(&motion)
+            self.carried(t)
         } else {
-            good.clone()
+            self.good.clone()
         };
-        let mut fit = fit_frame(
-            &ctx,
-            &anchor,
-            &anchor,
-            &mut views,
-            appearance,
-            params,
-            correct_cameras,
-        );
-        if cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
-            // A fit cut short is not a result.
-            return Err(Error::Cancelled);
-        }
-        // A zoom the scene does not mark (LSC): the frame's apparent size jumped with the
-        // intrinsics fixed. Fit it again with them free, from where the motion carries the pose.
-        // Only against the frame just before: after lost frames the organ may simply be
-        // elsewhere, and a lost stretch must not turn into a change of intrinsics.
-        if options.mode == Mode::LSC
-            && !correct_cameras
-            && !first
-            && good_frame + 1 == t
-            && !is_lost(&fit)
-            && zoom.fires(
-                &good,
-                &fit.state,
-                ctx.model_centre(&model.deformed(&good.shape)),
-            )
-        {
+        let mut fit = self.fit(views, &anchor, params, correct_cameras);
+        self.cancelled()?;
+        if options.mode == Mode::LSC && !correct_cameras && self.zoom_starts(t, &fit) {
             // The frames just before held the zoom's onset, taken for motion.
-            motion.forget_latest(ZOOM_ONSET_FRAMES);
-            let anchor = carried(&motion);
-            fit = fit_frame(&ctx, &anchor, &anchor, &mut views, appearance, params, true);
+            self.motion.forget_latest(ZOOM_ONSET_FRAMES);
+            fit = self.fit(views, &self.carried(t), params, true);
             correct_cameras = true;
-            if cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
-                return Err(Error::Cancelled);
-            }
+            self.cancelled()?;
         } else if correct_cameras && !in_zoom && !is_lost(&fit) {
-            zoom.corrected(&good, &fit.state);
+            self.zoom.corrected(&self.good, &fit.state);
         }
-        let mut lost = is_lost(&fit);
-        lost_run = if lost { lost_run + 1 } else { 0 };
-        if lost && lost_run.is_multiple_of(REINIT_AFTER_LOST) {
-            // Lost for a while: the organ may be back somewhere else. Place it afresh, keeping
-            // the shape and intrinsics learnt before the loss.
-            if let Ok(affine) = super::init::automatic_pose(scene, &model, appearance, t) {
-                let restart = FitState {
-                    affine,
-                    ..good.clone()
-                };
-                let again = fit_frame(
-                    &ctx,
-                    &restart,
-                    &restart,
-                    &mut views,
-                    appearance,
-                    &options.first,
-                    false,
-                );
-                if !is_lost(&again) {
-                    fit = again;
-                    lost = false;
-                    lost_run = 0;
-                }
-            }
-        }
+        let (fit, lost) = self.placed_afresh_if_lost(t, views, fit);
         // A lost frame keeps the last good state: nothing learnt from it.
         let state = if lost {
-            good.clone()
+            self.motion.clear();
+            self.zoom.reset();
+            self.good.clone()
         } else {
+            self.good = fit.state.clone();
+            self.good_frame = t;
+            self.first = false;
+            if !correct_cameras {
+                self.motion.push(t, self.good.affine);
+            }
             fit.state.clone()
         };
-        if lost {
-            motion.clear();
-            zoom.reset();
-        } else {
-            good = fit.state.clone();
-            good_frame = t;
-            first = false;
-            if !correct_cameras {
-                motion.push(t, good.affine);
-            }
+        Ok(Outcome { fit, state, lost })
+    }
+
+    /// A zoom the scene does not mark (LSC): the frame's apparent size jumped with the
+    /// intrinsics fixed. Only against the frame just before: after lost frames the organ may
+    /// simply be elsewhere, and a lost stretch must not turn into a change of intrinsics.
+    fn zoom_starts(&mut self, t: usize, fit: &FrameFit) -> bool {
+        if self.first || self.good_frame + 1 != t || is_lost(fit) {
+            return false;
         }
+        let model = self.ctx.model;
+        let centre = self.ctx.model_centre(&model.deformed(&self.good.shape));
+        self.zoom.fires(&self.good, &fit.state, centre)
+    }
+
+    /// After [`REINIT_AFTER_LOST`] lost frames in a row the organ may be back somewhere else:
+    /// it is placed afresh, keeping the shape and intrinsics learnt before the loss. Returns the
+    /// frame's fit and whether it is lost.
+    fn placed_afresh_if_lost(
+        &mut self,
+        t: usize,
+        views: &mut [ViewProbabilities],
+        fit: FrameFit,
+    ) -> (FrameFit, bool) {
+        if !is_lost(&fit) {
+            self.lost_run = 0;
+            return (fit, false);
+        }
+        self.lost_run += 1;
+        if !self.lost_run.is_multiple_of(REINIT_AFTER_LOST) {
+            return (fit, true);
+        }
+        let Ok(affine) =
+            super::init::automatic_pose(self.scene, self.ctx.model, self.appearance, t)
+        else {
+            return (fit, true);
+        };
+        let restart = FitState {
+            affine,
+            ..self.good.clone()
+        };
+        let again = self.fit(views, &restart, &self.options.first, false);
+        if is_lost(&again) {
+            (fit, true)
+        } else {
+            self.lost_run = 0;
+            (again, false)
+        }
+    }
+}
+
+/// Tracks `options.frames` from `start`, handing each frame to `on_frame` as it finishes.
+pub fn track(
+    scene: &Scene,
+    appearance: &Appearance,
+    start: FitState,
+    options: &TrackOptions,
+    cancel: Option<&AtomicBool>,
+    on_frame: &mut dyn FnMut(TrackedFrame) -> Result<(), Error>,
+) -> Result<(), Error> {
+    let model = Model::from_scene(scene);
+    let classes = ClassMap::from_scene(scene);
+    let mut tracker = FrameTracker {
+        ctx: FrameContext::new(&model, scene),
+        scene,
+        appearance,
+        options,
+        cancel,
+        good: start,
+        good_frame: options.frames.0,
+        first: true,
+        lost_run: 0,
+        motion: MotionHistory::default(),
+        zoom: ZoomDetector::default(),
+    };
+    for t in options.frames.0..=options.frames.1 {
+        tracker.cancelled()?;
+        let frames: Vec<_> = (0..scene.cameras.len())
+            .map(|c| scene.frame(c, t))
+            .collect::<Result<_, _>>()?;
+        let started = std::time::Instant::now();
+        let levels = fit_level(scene.cameras[0].width) + 3;
+        let mut views: Vec<ViewProbabilities> =
+            super::profile::time(super::profile::Phase::Pyramid, || {
+                frames
+                    .into_iter()
+                    .map(|f| ViewProbabilities::new(f, levels, classes.len()))
+                    .collect()
+            });
+        let Outcome { fit, state, lost } = tracker.frame(t, &mut views)?;
         let ms = started.elapsed().as_secs_f64() * 1e3;
         let Rendered {
             mut labels,
