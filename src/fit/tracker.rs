@@ -1,7 +1,10 @@
 //! Frame-to-frame tracking: warm start from the previous frame, per-frame confidence, and
 //! tracking loss. When confidence collapses (organ covered or out of view) the last good pose
 //! is held and the frame marked lost; shape and intrinsics learnt before are never updated from
-//! a lost frame, and fitting resumes from the last good state when the organ returns.
+//! a lost frame, and fitting resumes from the last good state when the organ returns. Inside a
+//! zoom (marked in the scene, or detected by [`super::zoom`] in LSC) the intrinsics are
+//! corrected while the pose is held where its motion before the zoom carries it
+//! ([`super::motion`]).
 
 use super::energy::{FitState, FrameContext};
 use super::model::Model;
