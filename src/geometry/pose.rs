@@ -131,7 +131,7 @@ impl RigidPose {
     }
 
     /// ∂P/∂(ω1, ω2, ω3, t1, t2, t3, s), exact, via the compact formula for the derivative of
-    /// the exponential map (Gallego & Yezzi 2015): ∂R/∂ω_i = (ω_i[ω]× + [ω × (I − R)e_i]×) R / |ω|².
+    /// the exponential map (Gallego & Yezzi 2015): ∂R/∂ω_i = (ω_i \[ω\]× + \[ω × (I − R)e_i\]×) R / |ω|².
     pub fn jacobian(&self, p_pre: DVec3) -> [[f64; 7]; 3] {
         let w = self.rotation_vector;
         let r = self.rotation();
@@ -160,7 +160,7 @@ impl RigidPose {
     }
 }
 
-/// [v]× such that [v]× x = v × x.
+/// \[v\]× such that \[v\]× x = v × x.
 pub fn skew(v: DVec3) -> DMat3 {
     DMat3::from_cols(
         DVec3::new(0.0, v.z, -v.y),
