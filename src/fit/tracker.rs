@@ -281,9 +281,11 @@ impl<'a> FrameTracker<'a> {
     /// a zoom holds the pose (zooming in and coming closer look alike within a frame).
     fn carried(&self, t: usize) -> FitState {
         FitState {
-            affine: self
-                .motion
-                .predict(&self.good.affine, t.saturating_sub(self.good_frame) as f64),
+            affine: self.motion.predict(
+                &self.good.affine,
+                t.saturating_sub(self.good_frame) as f64,
+                t,
+            ),
             ..self.good.clone()
         }
     }
