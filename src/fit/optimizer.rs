@@ -389,12 +389,12 @@ pub fn step(
         if delta.iter().any(|v| !v.is_finite()) {
             return None;
         }
+        let full = match &rig {
+            Some(p) => p * delta,
+            None => delta.clone(),
+        };
         let mut scale = 1.0;
         for _ in 0..tries {
-            let full = match &rig {
-                Some(p) => p * delta,
-                None => delta.clone(),
-            };
             let scaled: Vec<f64> = full.iter().map(|d| d * scale).collect();
             let mut next = apply_increment(state, block, &scaled, centre);
             ctx.model.shape.pca.clamp_weights(&mut next.shape);

@@ -159,10 +159,7 @@ pub fn build_joint_model(
         .collect();
     let pca = if samples.is_empty() {
         PcaModel {
-            mean: meshes
-                .iter()
-                .flat_map(|m| m.vertices.iter().copied())
-                .collect(),
+            mean: rest,
             modes: Vec::new(),
             sigma_mm: Vec::new(),
             explained_share: 1.0,
