@@ -2,6 +2,7 @@
 //! multi-structure segmentation and non-rigid pose estimation). Knows nothing of the GUI; the
 //! app and the CLI are two faces over these functions.
 
+#[cfg(feature = "gui")]
 pub mod app;
 pub mod appearance;
 pub mod classify;
@@ -15,7 +16,9 @@ pub mod pool;
 pub mod render;
 pub mod rng;
 pub mod scene;
+pub mod session;
 pub mod shape;
+pub mod strokes;
 pub mod synth;
 pub mod track;
 pub mod worker;

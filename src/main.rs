@@ -112,14 +112,14 @@ fn main() -> ExitCode {
 
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
-        None => endofuse::app::run_native("demo"),
+        None => open_app("demo"),
         Some(Command::Open { scene }) => {
             let scene = scene.unwrap_or_else(|| "demo".into());
             if scene != "demo" {
                 // A scene that does not load is bad input: say so before opening a window.
                 Scene::open(&scene, FrameCheck::Headers)?;
             }
-            endofuse::app::run_native(&scene)
+            open_app(&scene)
         }
         Some(Command::Info { scene, quick }) => {
             let check = if quick {
@@ -243,6 +243,21 @@ fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
     }
+}
+
+/// Opens the desktop app (blocks until its window closes).
+#[cfg(feature = "gui")]
+fn open_app(scene: &str) -> Result<()> {
+    endofuse::app::run_native(scene)
+}
+
+/// A build without the `gui` feature has every command but the app.
+#[cfg(not(feature = "gui"))]
+fn open_app(_scene: &str) -> Result<()> {
+    anyhow::bail!(
+        "this endofuse was built without the desktop app (cargo feature `gui`); \
+         rebuild with `cargo build --release` (default features) to open it"
+    )
 }
 
 /// A progress line on stderr, rewritten in place.

@@ -12,8 +12,6 @@ pub mod actions;
 pub mod frames;
 pub mod overlay3d;
 pub mod panels;
-pub mod seeds;
-pub mod session;
 pub mod view;
 pub mod views;
 
@@ -25,11 +23,11 @@ use crate::fit::tracker::TrackedFrame;
 use crate::geometry::Affine;
 use crate::scene::Scene;
 use crate::scene::template::PathTemplate;
+use crate::session::{self, FitSettings, FrameResult, SESSION_FORMAT, Session};
+use crate::strokes::SeedEditor;
 use crate::worker::{Command, Event, Task, Worker};
 use actions::Action;
-use seeds::SeedEditor;
 use serde::{Deserialize, Serialize};
-use session::{FitSettings, FrameResult, SESSION_FORMAT, Session};
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -344,12 +342,21 @@ impl EndofuseApp {
             self.prefs.recent.insert(0, spec.clone());
             self.prefs.recent.truncate(8);
         }
-        let autosave = session::autosave_path(self.autosave_dir.as_deref(), &spec);
+        let autosave = session::autosave_path(&self.autosave_folder(), &spec);
         self.autosave_offer = autosave.exists().then_some(autosave);
         self.scene = Some(scene);
         if let Some(p) = self.pending_session.take() {
             self.apply_session(p.session, &p.path);
         }
+    }
+
+    /// The folder of autosaves: the one set (tests), else the app's data folder, else the
+    /// temporary folder.
+    fn autosave_folder(&self) -> PathBuf {
+        self.autosave_dir
+            .clone()
+            .or_else(|| eframe::storage_dir("endofuse"))
+            .unwrap_or_else(std::env::temp_dir)
     }
 
     /// True when every view shows the current frame (frames decode on a loader thread).
@@ -444,7 +451,7 @@ impl EndofuseApp {
                 self.saved = (self.editor.revision, self.results.len());
                 self.notice = Some(format!("Saved {}", path.display()));
                 let _ = std::fs::remove_file(session::autosave_path(
-                    self.autosave_dir.as_deref(),
+                    &self.autosave_folder(),
                     &self.scene_spec,
                 ));
             }
@@ -466,7 +473,7 @@ impl EndofuseApp {
         self.last_autosave_s = now_s;
         self.autosaved = state;
         let session = self.session();
-        let path = session::autosave_path(self.autosave_dir.as_deref(), &self.scene_spec);
+        let path = session::autosave_path(&self.autosave_folder(), &self.scene_spec);
         std::thread::spawn(move || {
             let _ = session.save(&path);
         });

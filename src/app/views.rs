@@ -3,12 +3,12 @@
 //! placing the model happen here; what they change lives in the app state.
 
 use super::overlay3d::{self, CameraUniform, OverlayCallback, StyleUniform, Vertex};
-use super::seeds::Dab;
 use super::view::{ViewTransform, grid};
 use super::{EndofuseApp, Layer, Tool};
 use crate::geometry::Affine;
 use crate::overlay::{BACKGROUND_SEED_COLOUR, structure_colour};
 use crate::scene::{SEED_BACKGROUND, SEED_NONE};
+use crate::strokes::Dab;
 use eframe::egui_wgpu;
 use egui::{
     Color32, ColorImage, Pos2, Rect, Sense, Stroke, TextureHandle, TextureOptions, Vec2, pos2, vec2,

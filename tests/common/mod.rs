@@ -2,6 +2,7 @@
 //! the binary.
 #![allow(dead_code)]
 
+#[cfg(feature = "app-tests")]
 pub mod app;
 
 use std::path::{Path, PathBuf};

@@ -179,13 +179,8 @@ impl Session {
     }
 }
 
-/// Where the autosave of a scene lives: `dir`, else the app's data folder (or the temporary
-/// folder), one file per scene.
-pub fn autosave_path(dir: Option<&Path>, scene: &str) -> PathBuf {
-    let dir = dir
-        .map(Path::to_path_buf)
-        .or_else(|| eframe::storage_dir("endofuse"))
-        .unwrap_or_else(std::env::temp_dir);
+/// Where the autosave of a scene lives in the folder of autosaves `dir`: one file per scene.
+pub fn autosave_path(dir: &Path, scene: &str) -> PathBuf {
     let mut hash: u64 = 0xcbf2_9ce4_8422_2325;
     for b in scene.bytes() {
         hash = (hash ^ b as u64).wrapping_mul(0x0100_0000_01b3);
