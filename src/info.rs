@@ -2,10 +2,11 @@
 //! would use to check it before a long run.
 
 use crate::scene::{SEED_BACKGROUND, Scene};
-use crate::shape::CatalogSource;
+use crate::shape::{CatalogSource, JointShapeModel};
 use std::fmt::Write;
 
-pub fn summary(scene: &Scene) -> String {
+/// The summary of `scene`, whose structures' joint shape model is `shape`.
+pub fn summary(scene: &Scene, shape: &JointShapeModel) -> String {
     let mut s = String::new();
     let _ = writeln!(s, "scene: {}", scene.origin);
     let _ = writeln!(
@@ -47,8 +48,8 @@ pub fn summary(scene: &Scene) -> String {
             st.mesh_path.display()
         );
     }
-    let pca = &scene.shape.pca;
-    let source = match scene.shape.source {
+    let pca = &shape.pca;
+    let source = match shape.source {
         CatalogSource::Given => "from the given catalogs",
         CatalogSource::Transferred => "from the organ's catalog, carried to the other structures",
         CatalogSource::Generated => "from generated push/pull deformations",

@@ -10,6 +10,7 @@ pub mod error;
 pub mod fit;
 pub mod geometry;
 pub mod info;
+pub mod open;
 pub mod overlay;
 pub mod plane;
 pub mod pool;

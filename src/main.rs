@@ -3,9 +3,9 @@
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
-use endofuse::scene::FrameCheck;
+use endofuse::Error;
+use endofuse::fit::Model;
 use endofuse::synth::SynthOptions;
-use endofuse::{Error, Scene};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -115,20 +115,19 @@ fn run(cli: Cli) -> Result<()> {
         None => open_app("demo"),
         Some(Command::Open { scene }) => {
             let scene = scene.unwrap_or_else(|| "demo".into());
-            if scene != "demo" {
+            if scene != endofuse::open::DEMO {
                 // A scene that does not load is bad input: say so before opening a window.
-                Scene::open(&scene, FrameCheck::Headers)?;
+                Model::build(&endofuse::open::scene(&scene)?)?;
             }
             open_app(&scene)
         }
         Some(Command::Info { scene, quick }) => {
-            let check = if quick {
-                FrameCheck::Headers
-            } else {
-                FrameCheck::Decode
-            };
-            let scene = Scene::open(&scene, check)?;
-            print!("{}", endofuse::info::summary(&scene));
+            let scene = endofuse::open::scene(&scene)?;
+            if !quick {
+                scene.decode_frames(&progress_every("info: decoding", 20))?;
+            }
+            let model = Model::build(&scene)?;
+            print!("{}", endofuse::info::summary(&scene, &model.shape));
             Ok(())
         }
         Some(Command::Classify {
@@ -137,7 +136,7 @@ fn run(cli: Cli) -> Result<()> {
             frames,
             trees,
         }) => {
-            let scene = Scene::open(&scene, FrameCheck::Headers)?;
+            let scene = endofuse::open::scene(&scene)?;
             let range = frame_range(frames.as_deref(), scene.frame_count)?;
             let params = endofuse::appearance::ForestParams {
                 trees: trees.max(1),
@@ -167,7 +166,7 @@ fn run(cli: Cli) -> Result<()> {
             let mode = endofuse::fit::Mode::parse(&mode).ok_or_else(|| {
                 endofuse::InputError::new("--mode", format!("'{mode}' is not one of R, L, LS, LSC"))
             })?;
-            let scene = Scene::open(&scene, FrameCheck::Headers)?;
+            let scene = endofuse::open::scene(&scene)?;
             let range = frame_range(frames.as_deref(), scene.frame_count)?;
             let m = endofuse::track::run(&scene, &out, mode, range, None, &progress("track"))?;
             if let Some(r) = endofuse::fit::profile::report(m.frames) {
@@ -260,10 +259,18 @@ fn open_app(_scene: &str) -> Result<()> {
     )
 }
 
-/// A progress line on stderr, rewritten in place.
+/// A progress line on stderr for frames, rewritten in place.
 fn progress(what: &'static str) -> impl Fn(usize, usize) + Sync {
+    progress_every(what, 1)
+}
+
+/// A progress line on stderr, `what: frame done/total`, rewritten in place every `every`
+/// frames and at the last.
+fn progress_every(what: &'static str, every: usize) -> impl Fn(usize, usize) + Sync {
     move |done, total| {
-        eprint!("\r{what}: frame {done}/{total}");
+        if done.is_multiple_of(every) || done == total {
+            eprint!("\r{what}: frame {done}/{total}");
+        }
         if done == total {
             eprintln!();
         }

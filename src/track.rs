@@ -92,7 +92,7 @@ pub fn run(
     progress: &dyn Fn(usize, usize),
 ) -> Result<TrackMetrics, Error> {
     let appearance = Appearance::train(scene, &ForestParams::default(), cancel)?;
-    let model = Model::from_scene(scene);
+    let model = Model::build(scene)?;
     let affine = match scene.initial_pose {
         Some(a) => a,
         None => crate::fit::init::automatic_pose(scene, &model, &appearance, frames.0)?,
@@ -101,11 +101,19 @@ pub fn run(
     let options = TrackOptions::new(mode, frames, scene.cameras[0].width);
     let total = frames.1 + 1 - frames.0;
     let mut recorder = Recorder::new(scene, out, mode);
-    track(scene, &appearance, start, &options, cancel, &mut |f| {
-        recorder.record(&f)?;
-        progress(recorder.frames(), total);
-        Ok(())
-    })?;
+    track(
+        scene,
+        &model,
+        &appearance,
+        start,
+        &options,
+        cancel,
+        &mut |f| {
+            recorder.record(&f)?;
+            progress(recorder.frames(), total);
+            Ok(())
+        },
+    )?;
     recorder.finish(appearance.stats.train_s)
 }
 

@@ -10,7 +10,7 @@ use crate::fit::Model;
 use crate::fit::optimizer::Mode;
 use crate::fit::tracker::{TrackOptions, TrackedFrame, initial_state, track};
 use crate::geometry::Affine;
-use crate::scene::{FrameCheck, Scene, Seeds};
+use crate::scene::{Scene, Seeds};
 use crossbeam_channel::{Receiver, Sender, unbounded};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -59,7 +59,11 @@ pub enum Task {
 
 /// What the worker tells the UI.
 pub enum Event {
-    SceneLoaded(Arc<Scene>),
+    /// A scene and the model of its structures (the joint shape model built once, here).
+    SceneLoaded {
+        scene: Arc<Scene>,
+        model: Arc<Model>,
+    },
     Trained(Arc<Appearance>),
     /// Probabilities of `frame`, one map per camera.
     Probabilities {
@@ -101,6 +105,8 @@ pub struct Worker {
 
 struct State {
     scene: Option<Arc<Scene>>,
+    /// The model of the scene's structures (seeds change the scene, never its structures).
+    model: Option<Arc<Model>>,
     appearance: Option<Arc<Appearance>>,
 }
 
@@ -117,6 +123,7 @@ impl Worker {
             .spawn(move || {
                 let mut state = State {
                     scene: None,
+                    model: None,
                     appearance: None,
                 };
                 for (id, command) in inbox {
@@ -216,6 +223,13 @@ fn need_scene(state: &State) -> Result<Arc<Scene>, Error> {
         .ok_or_else(|| crate::error::input_err("scene", "no scene is loaded"))
 }
 
+fn need_model(state: &State) -> Result<Arc<Model>, Error> {
+    state
+        .model
+        .clone()
+        .ok_or_else(|| crate::error::input_err("scene", "no scene is loaded"))
+}
+
 fn need_appearance(state: &State) -> Result<Arc<Appearance>, Error> {
     state
         .appearance
@@ -231,12 +245,15 @@ fn run(
 ) -> Result<(), Error> {
     match command {
         Command::LoadScene(spec) => {
-            let scene = Arc::new(Scene::open(&spec, FrameCheck::Headers)?);
+            let scene = Arc::new(crate::open::scene(&spec)?);
+            let model = Arc::new(Model::build(&scene)?);
             state.scene = Some(scene.clone());
+            state.model = Some(model.clone());
             state.appearance = None;
-            let _ = out.send(Event::SceneLoaded(scene));
+            let _ = out.send(Event::SceneLoaded { scene, model });
         }
         Command::UseScene(scene) => {
+            state.model = Some(Arc::new(Model::build(&scene)?));
             state.scene = Some(scene);
             state.appearance = None;
         }
@@ -269,12 +286,8 @@ fn run(
         Command::Initialise { frame } => {
             let scene = need_scene(state)?;
             let appearance = need_appearance(state)?;
-            let affine = crate::fit::init::automatic_pose(
-                &scene,
-                &Model::from_scene(&scene),
-                &appearance,
-                frame,
-            )?;
+            let model = need_model(state)?;
+            let affine = crate::fit::init::automatic_pose(&scene, &model, &appearance, frame)?;
             let _ = out.send(Event::Initialised(affine));
         }
         Command::Track {
@@ -295,7 +308,7 @@ fn run(
                     ),
                 ));
             }
-            let model = Model::from_scene(&scene);
+            let model = need_model(state)?;
             let affine = match start.or(scene.initial_pose) {
                 Some(a) => a,
                 None => crate::fit::init::automatic_pose(&scene, &model, &appearance, frames.0)?,
@@ -306,6 +319,7 @@ fn run(
             let mut done = 0;
             track(
                 &scene,
+                &model,
                 &appearance,
                 initial_state(&scene, &model, affine),
                 &options,

@@ -6,7 +6,6 @@ mod common;
 use std::ffi::OsStr;
 
 use endofuse::Scene;
-use endofuse::scene::FrameCheck;
 use endofuse::scene::labels::read_label_png;
 use endofuse::synth::phantom::{Phantom, k1_for_focal};
 use endofuse::synth::{SynthOptions, memory_scene};
@@ -30,7 +29,7 @@ fn synth_writes_a_scene_info_accepts_with_consistent_ground_truth() {
     assert!(text.contains("seeds: frames 0–2"), "{text}");
     assert!(text.contains("zoom changes: frames 4–7"), "{text}");
 
-    let scene = Scene::open(dir.to_str().unwrap(), FrameCheck::Headers).unwrap();
+    let scene = Scene::open(&dir).unwrap();
     assert_eq!(scene.cameras.len(), 2);
     assert_eq!(scene.seeds.seeded_frames(), vec![0, 1, 2]);
     let counts = scene.seeds.pixel_counts();
@@ -128,7 +127,16 @@ fn more_views_and_no_tools_or_zoom() {
             "--no-zoom",
         ],
     );
-    let scene = Scene::open(dir.to_str().unwrap(), FrameCheck::Decode).unwrap();
+    let scene = Scene::open(&dir).unwrap();
+    let seen = std::sync::Mutex::new(Vec::new());
+    scene
+        .decode_frames(&|done, total| seen.lock().unwrap().push((done, total)))
+        .unwrap();
+    assert_eq!(
+        seen.into_inner().unwrap().last(),
+        Some(&(6, 6)),
+        "progress over every camera's frames"
+    );
     assert_eq!(scene.cameras.len(), 3);
     assert!(scene.zoom_changes.is_empty());
     assert!(

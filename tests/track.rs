@@ -281,7 +281,7 @@ fn tracking_overlay_picture() {
         &out,
         &["--mode", "LSC", "--frames", "0..9"],
     );
-    let scene = endofuse::Scene::open("demo", endofuse::scene::FrameCheck::Headers).unwrap();
+    let scene = endofuse::open::scene("demo").unwrap();
     let index = |l: u8| scene.structures.iter().position(|s| s.label == l);
     let mut views = Vec::new();
     for (c, cam) in scene.cameras.iter().enumerate() {

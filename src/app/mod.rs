@@ -305,7 +305,7 @@ impl EndofuseApp {
         self.worker.send(Command::LoadScene(spec.to_string()));
     }
 
-    fn scene_loaded(&mut self, scene: Arc<Scene>) {
+    fn scene_loaded(&mut self, scene: Arc<Scene>, model: Arc<Model>) {
         if let Some(spec) = self.loading_spec.take() {
             self.scene_spec = spec;
         }
@@ -313,7 +313,7 @@ impl EndofuseApp {
         self.seeds_sent = self.editor.revision;
         self.saved = (self.editor.revision, 0);
         self.autosaved = self.saved;
-        self.model = Some(Arc::new(Model::from_scene(&scene)));
+        self.model = Some(model);
         let classes = ClassMap::from_scene(&scene);
         // Kidney (the first structure class) when there is one, else background.
         self.class = 1.min(classes.len() - 1);
@@ -733,9 +733,9 @@ impl EndofuseApp {
 
     fn handle_event(&mut self, e: Event, ctx: &egui::Context) {
         match e {
-            Event::SceneLoaded(scene) => {
+            Event::SceneLoaded { scene, model } => {
                 self.error = None;
-                self.scene_loaded(scene);
+                self.scene_loaded(scene, model);
             }
             Event::Trained(a) => {
                 self.notice = Some(format!(

@@ -641,7 +641,7 @@ mod tests {
         })
         .unwrap();
         let appearance = Appearance::for_tests(&scene, 5);
-        let model = Model::from_scene(&scene);
+        let model = Model::build(&scene).unwrap();
         let classes = crate::appearance::ClassMap::from_scene(&scene);
         let ctx = FrameContext::new(&model, &scene);
         let truth = scene.ground_truth.trajectory.as_ref().unwrap().frames[0].clone();

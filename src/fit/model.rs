@@ -2,6 +2,7 @@
 //! global affine T (eq. 2), and each structure's edge–face adjacency, from which the rim
 //! (silhouette-generating edges) is found for any camera.
 
+use crate::error::InputError;
 use crate::geometry::{Affine, Mesh};
 use crate::render::RenderObject;
 use crate::scene::Scene;
@@ -40,7 +41,17 @@ pub struct Model {
 }
 
 impl Model {
-    pub fn from_scene(scene: &Scene) -> Self {
+    /// The model of a scene's structures: their meshes' adjacency and the joint shape model
+    /// built from their catalogs (generated when none is given: a few hundred ms, so build it
+    /// once per scene and share it). An error names the scene.
+    pub fn build(scene: &Scene) -> Result<Self, InputError> {
+        let shape = crate::shape::joint_model_of(&scene.structures)
+            .map_err(|e| InputError::new(&scene.origin, format!("shape model: {e}")))?;
+        Ok(Self::with_shape(scene, shape))
+    }
+
+    /// The model of a scene's structures with a joint shape model already built for them.
+    pub fn with_shape(scene: &Scene, shape: JointShapeModel) -> Self {
         let structures = scene
             .structures
             .iter()
@@ -57,7 +68,7 @@ impl Model {
         let anchor = anchor_index(&scene.structures);
         Self {
             structures,
-            shape: scene.shape.clone(),
+            shape,
             anchor,
         }
     }

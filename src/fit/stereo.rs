@@ -723,7 +723,7 @@ mod tests {
         let scene = crate::synth::memory_scene(&options).unwrap();
         let appearance = Appearance::for_tests(&scene, 8);
         let phantom = Phantom::new(options);
-        let model = Model::from_scene(&scene);
+        let model = Model::build(&scene).unwrap();
         let truth = FitState {
             affine: phantom.pose(0),
             shape: vec![0.0; model.shape.mode_count()],
@@ -738,7 +738,7 @@ mod tests {
         appearance: &Appearance,
         state: &FitState,
     ) -> StereoSet {
-        let model = Model::from_scene(scene);
+        let model = Model::build(scene).unwrap();
         let ctx = FrameContext::new(&model, scene);
         let classes = ClassMap::from_scene(scene);
         let mut views: Vec<ViewProbabilities> = (0..2)
@@ -836,7 +836,7 @@ mod tests {
     #[test]
     fn gradient_matches_central_differences() {
         let (scene, appearance, _, truth) = setup();
-        let model = Model::from_scene(&scene);
+        let model = Model::build(&scene).unwrap();
         let ctx = FrameContext::new(&model, &scene);
         let matches = matches_at(&scene, &appearance, &truth);
         assert!(

@@ -419,16 +419,16 @@ impl<'a> FrameTracker<'a> {
 /// Tracks `options.frames` from `start`, handing each frame to `on_frame` as it finishes.
 pub fn track(
     scene: &Scene,
+    model: &Model,
     appearance: &Appearance,
     start: FitState,
     options: &TrackOptions,
     cancel: Option<&AtomicBool>,
     on_frame: &mut dyn FnMut(TrackedFrame) -> Result<(), Error>,
 ) -> Result<(), Error> {
-    let model = Model::from_scene(scene);
     let classes = ClassMap::from_scene(scene);
     let mut tracker = FrameTracker {
-        ctx: FrameContext::new(&model, scene),
+        ctx: FrameContext::new(model, scene),
         scene,
         appearance,
         options,
@@ -460,7 +460,7 @@ pub fn track(
             mut labels,
             hidden,
             centroids,
-        } = render_state(scene, &model, &state);
+        } = render_state(scene, model, &state);
         for (l, view) in labels.iter_mut().zip(views.iter_mut()) {
             mask_occluders(l, view, appearance, fit_level(scene.cameras[0].width));
         }
@@ -501,7 +501,7 @@ mod tests {
         })
         .unwrap();
         let appearance = Appearance::for_tests(&scene, 2);
-        let model = Model::from_scene(&scene);
+        let model = Model::build(&scene).unwrap();
         let classes = ClassMap::from_scene(&scene);
         let ctx = FrameContext::new(&model, &scene);
         let truth = &scene.ground_truth.trajectory.as_ref().unwrap().frames[0];

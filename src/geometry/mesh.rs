@@ -1,7 +1,9 @@
 //! Triangle meshes of the preoperative structures (millimetres): validation with errors that
-//! say which vertex or face is wrong, normals, and simple measures.
+//! say which vertex or face is wrong, normals, simple measures, and the unit icosphere the
+//! procedural anatomy and the tests build on.
 
 use glam::DVec3;
+use std::collections::HashMap;
 
 /// An indexed triangle mesh. Vertex order matters: shape catalogs and PCA modes rely on it.
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -129,6 +131,72 @@ pub fn vertex_mean(vertices: &[DVec3]) -> DVec3 {
     vertices.iter().copied().sum::<DVec3>() / vertices.len() as f64
 }
 
+/// Unit icosphere with `subdivisions` rounds of 4-way splits (12, 42, 162, 642, 2562 … vertices),
+/// counter-clockwise seen from outside.
+pub fn icosphere(subdivisions: u32) -> Mesh {
+    let t = (1.0 + 5f64.sqrt()) / 2.0;
+    let mut vertices: Vec<DVec3> = [
+        (-1.0, t, 0.0),
+        (1.0, t, 0.0),
+        (-1.0, -t, 0.0),
+        (1.0, -t, 0.0),
+        (0.0, -1.0, t),
+        (0.0, 1.0, t),
+        (0.0, -1.0, -t),
+        (0.0, 1.0, -t),
+        (t, 0.0, -1.0),
+        (t, 0.0, 1.0),
+        (-t, 0.0, -1.0),
+        (-t, 0.0, 1.0),
+    ]
+    .iter()
+    .map(|&(x, y, z)| DVec3::new(x, y, z).normalize())
+    .collect();
+    let mut faces: Vec<[u32; 3]> = vec![
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
+    ];
+    for _ in 0..subdivisions {
+        let mut cache: HashMap<(u32, u32), u32> = HashMap::new();
+        let mut midpoint = |a: u32, b: u32, verts: &mut Vec<DVec3>| -> u32 {
+            let key = (a.min(b), a.max(b));
+            *cache.entry(key).or_insert_with(|| {
+                verts.push(((verts[a as usize] + verts[b as usize]) * 0.5).normalize());
+                (verts.len() - 1) as u32
+            })
+        };
+        let mut next = Vec::with_capacity(faces.len() * 4);
+        for [a, b, c] in faces {
+            let ab = midpoint(a, b, &mut vertices);
+            let bc = midpoint(b, c, &mut vertices);
+            let ca = midpoint(c, a, &mut vertices);
+            next.extend([[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]);
+        }
+        faces = next;
+    }
+    let mut mesh = Mesh::new(vertices, faces);
+    mesh.orient_outwards();
+    mesh
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -175,5 +243,30 @@ mod tests {
         let n = m.vertex_normals();
         // The apex normal of the origin vertex points away from the tetrahedron.
         assert!(n[0].dot(DVec3::ONE) < 0.0);
+    }
+
+    #[test]
+    fn icosphere_is_a_closed_outward_unit_sphere() {
+        let s = icosphere(3);
+        assert_eq!(s.vertices.len(), 642);
+        assert_eq!(s.faces.len(), 1280);
+        assert!(s.validate().is_ok());
+        let vol = s.signed_volume();
+        assert!(
+            (vol - 4.0 / 3.0 * std::f64::consts::PI).abs() < 0.05,
+            "volume {vol}"
+        );
+        // Closed: every edge is shared by exactly two faces, in opposite directions.
+        let mut edges = HashMap::new();
+        for f in &s.faces {
+            for k in 0..3 {
+                *edges.entry((f[k], f[(k + 1) % 3])).or_insert(0) += 1;
+            }
+        }
+        assert!(
+            edges
+                .iter()
+                .all(|(&(a, b), &n)| n == 1 && edges.get(&(b, a)) == Some(&1))
+        );
     }
 }

@@ -508,7 +508,7 @@ mod tests {
 
     #[test]
     fn stl_ascii_and_binary_round_trip_with_welding() {
-        let mesh = crate::synth::anatomy::icosphere(1);
+        let mesh = crate::geometry::mesh::icosphere(1);
         let mut ascii = String::from("solid t\n");
         let mut binary = vec![0u8; 80];
         binary.extend((mesh.faces.len() as u32).to_le_bytes());
@@ -568,7 +568,7 @@ mod tests {
 
     #[test]
     fn obj_write_read_round_trip() {
-        let mesh = crate::synth::anatomy::icosphere(2);
+        let mesh = crate::geometry::mesh::icosphere(2);
         let back = parse_obj(obj_string(&mesh).as_bytes()).unwrap();
         assert_eq!(back.faces, mesh.faces);
         for (a, b) in back.vertices.iter().zip(&mesh.vertices) {

@@ -321,7 +321,7 @@ mod tests {
     }
 
     fn random_blob(rng: &mut Rng, center: DVec3, radius: f64) -> Mesh {
-        let s = crate::synth::anatomy::icosphere(2);
+        let s = crate::geometry::mesh::icosphere(2);
         let axes = DVec3::new(
             rng.range(0.6, 1.4),
             rng.range(0.6, 1.4),

@@ -1,7 +1,10 @@
 //! Scenes (CONTRACT §2): cameras, frames, structures with their meshes and joint shape model,
-//! seeds, ground truth and zoom changes. [`Scene::open`] reads a scene folder, its scene.json,
-//! or the word `demo`, and validates everything it can without decoding every frame; each
-//! problem is one [`InputError`] naming the file and what is wrong.
+//! seeds, ground truth and zoom changes. [`Scene::open`] reads a scene folder or its scene.json
+//! and validates everything it can without decoding every frame (frame headers, meshes,
+//! catalogs, seeds, ground truth); [`Scene::decode_frames`] decodes every frame as well. Each
+//! problem is one [`InputError`] naming the file and what is wrong. Parsing stops at the
+//! files: the shape model is built from the structures by `fit::Model::build`, and the word
+//! `demo` is resolved by `crate::open`.
 
 pub mod format;
 pub mod frames;
@@ -15,7 +18,6 @@ use crate::geometry::mesh_io::load_mesh;
 use crate::geometry::pose::is_rotation;
 use crate::geometry::{Affine, Camera, Extrinsics, Intrinsics, Mesh};
 use crate::plane::LabelImage;
-use crate::shape::{JointShapeModel, build_joint_model};
 use format::{FORMAT_V1, SceneFile};
 use frames::{FrameCache, FrameSource};
 use glam::{DMat3, DVec3};
@@ -99,7 +101,6 @@ pub struct Scene {
     pub cameras: Vec<Camera>,
     pub frame_sources: Vec<FrameSource>,
     pub structures: Vec<Structure>,
-    pub shape: JointShapeModel,
     pub initial_pose: Option<Affine>,
     pub seeds: Seeds,
     pub seeds_template: Option<PathTemplate>,
@@ -110,32 +111,20 @@ pub struct Scene {
     cache: Arc<FrameCache>,
 }
 
-/// How much `Scene::open` checks of the frames.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum FrameCheck {
-    /// Every frame exists and its header gives the camera's size (cheap).
-    Headers,
-    /// Every frame decodes completely (what `info` does).
-    Decode,
-}
-
 impl Scene {
-    /// Opens `demo`, a scene folder, or a scene.json.
-    pub fn open(spec: &str, check: FrameCheck) -> Result<Scene, InputError> {
-        if spec == "demo" {
-            return crate::synth::demo_scene();
-        }
-        let p = Path::new(spec);
-        let json = if p.is_dir() {
-            p.join("scene.json")
+    /// Opens a scene folder or its scene.json: [`Scene::load`] of the folder's scene.json.
+    pub fn open(path: &Path) -> Result<Scene, InputError> {
+        let json = if path.is_dir() {
+            path.join("scene.json")
         } else {
-            p.to_path_buf()
+            path.to_path_buf()
         };
-        Self::load(&json, check)
+        Self::load(&json)
     }
 
-    /// Loads and validates a scene.json and everything it refers to.
-    pub fn load(json_path: &Path, check: FrameCheck) -> Result<Scene, InputError> {
+    /// Loads and validates a scene.json and everything it refers to; every frame must exist
+    /// and its header give the camera's size.
+    pub fn load(json_path: &Path) -> Result<Scene, InputError> {
         let text = std::fs::read_to_string(json_path).map_err(|e| {
             let what = if json_path.exists() {
                 format!("cannot read: {e}")
@@ -150,15 +139,10 @@ impl Scene {
             .parent()
             .map(Path::to_path_buf)
             .unwrap_or_default();
-        Self::from_file(file, &root, json_path, check)
+        Self::from_file(file, &root, json_path)
     }
 
-    fn from_file(
-        file: SceneFile,
-        root: &Path,
-        json_path: &Path,
-        check: FrameCheck,
-    ) -> Result<Scene, InputError> {
+    fn from_file(file: SceneFile, root: &Path, json_path: &Path) -> Result<Scene, InputError> {
         let bad = |problem: String| InputError::new(json_path, problem);
         if file.format != FORMAT_V1 {
             return Err(bad(format!(
@@ -254,7 +238,6 @@ impl Scene {
             }
             zoom_changes.push((a as usize, b as usize));
         }
-        let shape = build_shape(&structures).map_err(bad)?;
         let mut scene = Scene {
             root: Some(root.to_path_buf()),
             origin: json_path.display().to_string(),
@@ -263,7 +246,6 @@ impl Scene {
             cameras,
             frame_sources,
             structures,
-            shape,
             initial_pose,
             seeds: Seeds::default(),
             seeds_template: None,
@@ -271,7 +253,7 @@ impl Scene {
             zoom_changes,
             cache: Arc::new(FrameCache::new(frames::DEFAULT_CACHE_FRAMES)),
         };
-        scene.check_frames(check)?;
+        scene.check_frame_headers()?;
         if let Some(t) = &file.seeds {
             let template = PathTemplate::parse(t).map_err(|e| bad(format!("seeds: {e}")))?;
             scene.seeds = scene.load_seeds(&template)?;
@@ -295,10 +277,9 @@ impl Scene {
         seeds: Seeds,
         ground_truth: GroundTruth,
         zoom_changes: Vec<(usize, usize)>,
-    ) -> Result<Scene, String> {
+    ) -> Scene {
         let frame_count = frames.first().map(|f| f.len()).unwrap_or(0);
-        let shape = build_shape(&structures)?;
-        Ok(Scene {
+        Scene {
             root: None,
             origin: origin.to_string(),
             fps,
@@ -309,14 +290,13 @@ impl Scene {
                 .map(|f| FrameSource::Memory(Arc::new(f)))
                 .collect(),
             structures,
-            shape,
             initial_pose,
             seeds,
             seeds_template: None,
             ground_truth,
             zoom_changes,
             cache: Arc::new(FrameCache::new(1)),
-        })
+        }
     }
 
     /// The same scene with other seeds (the app's painted strokes); frames and their cache
@@ -330,7 +310,6 @@ impl Scene {
             cameras: self.cameras.clone(),
             frame_sources: self.frame_sources.clone(),
             structures: self.structures.clone(),
-            shape: self.shape.clone(),
             initial_pose: self.initial_pose,
             seeds,
             seeds_template: self.seeds_template.clone(),
@@ -406,30 +385,28 @@ impl Scene {
         Ok(img)
     }
 
-    fn check_frames(&self, check: FrameCheck) -> Result<(), InputError> {
+    /// Every frame file exists and its header gives its camera's size (cheap).
+    fn check_frame_headers(&self) -> Result<(), InputError> {
         for (c, cam) in self.cameras.iter().enumerate() {
-            let source = &self.frame_sources[c];
             for t in 0..self.frame_count {
-                let Some(path) = source.path(t) else { continue };
-                match check {
-                    FrameCheck::Headers => {
-                        frames::check_frame_header(&path, (cam.width, cam.height))?
-                    }
-                    FrameCheck::Decode => {
-                        frames::decode_frame(&path, (cam.width, cam.height))?;
-                        if t % 20 == 19 || t + 1 == self.frame_count {
-                            eprint!(
-                                "\rchecking frames of '{}': {}/{}",
-                                cam.name,
-                                t + 1,
-                                self.frame_count
-                            );
-                        }
-                    }
+                if let Some(path) = self.frame_sources[c].path(t) {
+                    frames::check_frame_header(&path, (cam.width, cam.height))?;
                 }
             }
-            if check == FrameCheck::Decode {
-                eprintln!();
+        }
+        Ok(())
+    }
+
+    /// Decodes every frame file of every camera completely (what `info` does), reporting
+    /// `progress(done, total)` over all cameras' frames.
+    pub fn decode_frames(&self, progress: &dyn Fn(usize, usize)) -> Result<(), InputError> {
+        let total = self.cameras.len() * self.frame_count;
+        for (c, cam) in self.cameras.iter().enumerate() {
+            for t in 0..self.frame_count {
+                if let Some(path) = self.frame_sources[c].path(t) {
+                    frames::decode_frame(&path, (cam.width, cam.height))?;
+                }
+                progress(c * self.frame_count + t + 1, total);
             }
         }
         Ok(())
@@ -678,27 +655,4 @@ fn load_catalog(dir: &Path, mesh: &Mesh) -> Result<Vec<Vec<DVec3>>, InputError> 
             Ok(m.vertices)
         })
         .collect()
-}
-
-/// The joint shape model; the anchor (organ) is the largest visible structure.
-fn build_shape(structures: &[Structure]) -> Result<JointShapeModel, String> {
-    let meshes: Vec<&Mesh> = structures.iter().map(|s| &s.mesh).collect();
-    let catalogs: Vec<Option<Vec<Vec<DVec3>>>> =
-        structures.iter().map(|s| s.catalog.clone()).collect();
-    let anchor = structures
-        .iter()
-        .enumerate()
-        .filter(|(_, s)| s.visible)
-        .max_by(|a, b| {
-            let size = |s: &Structure| {
-                s.mesh
-                    .bounding_box()
-                    .map(|(lo, hi)| (hi - lo).length())
-                    .unwrap_or(0.0)
-            };
-            size(a.1).total_cmp(&size(b.1))
-        })
-        .map(|(i, _)| i)
-        .unwrap_or(0);
-    build_joint_model(&meshes, &catalogs, anchor)
 }

@@ -197,7 +197,7 @@ mod tests {
 
     #[test]
     fn field_is_smooth_and_moves_inner_points_with_the_surface() {
-        let sphere = crate::synth::anatomy::icosphere(3);
+        let sphere = crate::geometry::mesh::icosphere(3);
         let sphere = Mesh::new(
             sphere.vertices.iter().map(|v| *v * 30.0).collect(),
             sphere.faces,

@@ -11,6 +11,20 @@ pub mod deform;
 pub mod pca;
 
 pub use deform::{DeformationField, DeformationSpread};
+
+/// Why a joint shape model cannot be built from the structures' catalogs.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ShapeError {
+    #[error("shape catalog is empty")]
+    EmptyCatalog,
+    #[error("catalog shape {index} has {got} vertices, the first has {expected}")]
+    SampleSize {
+        /// 1-based, as a user counts the catalog's files.
+        index: usize,
+        got: usize,
+        expected: usize,
+    },
+}
 pub use pca::PcaModel;
 
 use crate::geometry::Mesh;
@@ -73,6 +87,31 @@ impl JointShapeModel {
     }
 }
 
+/// The joint model of a scene's structures (their meshes and the catalogs given with them);
+/// the anchor (the organ, whose surface carries generated forces) is the largest visible
+/// structure.
+pub fn joint_model_of(
+    structures: &[crate::scene::Structure],
+) -> Result<JointShapeModel, ShapeError> {
+    let meshes: Vec<&Mesh> = structures.iter().map(|s| &s.mesh).collect();
+    let catalogs: Vec<Option<Vec<Vec<DVec3>>>> =
+        structures.iter().map(|s| s.catalog.clone()).collect();
+    let size = |s: &crate::scene::Structure| {
+        s.mesh
+            .bounding_box()
+            .map(|(lo, hi)| (hi - lo).length())
+            .unwrap_or(0.0)
+    };
+    let anchor = structures
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| s.visible)
+        .max_by(|a, b| size(a.1).total_cmp(&size(b.1)))
+        .map(|(i, _)| i)
+        .unwrap_or(0);
+    build_joint_model(&meshes, &catalogs, anchor)
+}
+
 /// Builds the joint model. `meshes[i]` is structure i's mesh, `catalogs[i]` its optional
 /// catalog (vertex arrays already checked against the mesh), `anchor` the structure whose
 /// surface carries generated forces and whose catalog others follow (the organ).
@@ -80,7 +119,7 @@ pub fn build_joint_model(
     meshes: &[&Mesh],
     catalogs: &[Option<Vec<Vec<DVec3>>>],
     anchor: usize,
-) -> Result<JointShapeModel, String> {
+) -> Result<JointShapeModel, ShapeError> {
     let mut parts = Vec::new();
     let mut offset = 0;
     for m in meshes {
@@ -93,11 +132,9 @@ pub fn build_joint_model(
     } else {
         catalogs.iter().position(|c| c.is_some())
     };
-    let (per_structure, source) = match anchor {
-        Some(a) => {
-            let anchor_cat = catalogs[a]
-                .as_ref()
-                .ok_or("internal: anchor catalog vanished")?;
+    let anchor_catalog = anchor.and_then(|a| Some((a, catalogs[a].as_ref()?)));
+    let (per_structure, source) = match anchor_catalog {
+        Some((a, anchor_cat)) => {
             let n = anchor_cat.len();
             let mut all_given = true;
             let per: Vec<Vec<Vec<DVec3>>> = meshes
@@ -260,7 +297,7 @@ mod tests {
     use super::*;
 
     fn scaled_sphere(subdiv: u32, r: f64, c: DVec3) -> Mesh {
-        let s = crate::synth::anatomy::icosphere(subdiv);
+        let s = crate::geometry::mesh::icosphere(subdiv);
         Mesh::new(s.vertices.iter().map(|v| *v * r + c).collect(), s.faces)
     }
 

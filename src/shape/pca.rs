@@ -29,19 +29,18 @@ impl PcaModel {
         samples: &[Vec<DVec3>],
         variance_share: f64,
         max_modes: usize,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, super::ShapeError> {
         let n = samples.len();
         let Some(first) = samples.first() else {
-            return Err("shape catalog is empty".into());
+            return Err(super::ShapeError::EmptyCatalog);
         };
         let v = first.len();
         if let Some(i) = samples.iter().position(|s| s.len() != v) {
-            return Err(format!(
-                "catalog shape {} has {} vertices, the first has {}",
-                i + 1,
-                samples[i].len(),
-                v
-            ));
+            return Err(super::ShapeError::SampleSize {
+                index: i + 1,
+                got: samples[i].len(),
+                expected: v,
+            });
         }
         let mean: Vec<DVec3> = (0..v)
             .map(|k| samples.iter().map(|s| s[k]).sum::<DVec3>() / n as f64)
@@ -260,10 +259,15 @@ mod tests {
         assert_eq!(one.mode_count(), 0);
         let mut bad = samples.clone();
         bad[3].pop();
-        assert!(
-            PcaModel::from_samples(&bad, 0.95, 10)
-                .unwrap_err()
-                .contains("shape 4")
+        let err = PcaModel::from_samples(&bad, 0.95, 10).unwrap_err();
+        assert_eq!(
+            err,
+            crate::shape::ShapeError::SampleSize {
+                index: 4,
+                got: samples[0].len() - 1,
+                expected: samples[0].len()
+            }
         );
+        assert!(err.to_string().contains("shape 4"), "{err}");
     }
 }

@@ -291,7 +291,7 @@ pub fn memory_scene(options: &SynthOptions) -> Result<Scene, InputError> {
         }),
         memory_labels: Some(Arc::new(labels)),
     };
-    Scene::in_memory(
+    Ok(Scene::in_memory(
         "demo",
         30.0,
         cams0,
@@ -301,8 +301,7 @@ pub fn memory_scene(options: &SynthOptions) -> Result<Scene, InputError> {
         seeds,
         ground_truth,
         phantom.zoom_range.into_iter().collect(),
-    )
-    .map_err(|p| InputError::new("demo", p))
+    ))
 }
 
 /// The built-in demo scene.
