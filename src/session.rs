@@ -5,7 +5,7 @@
 
 use crate::appearance::Appearance;
 use crate::error::{Error, InputError};
-use crate::fit::energy::FitState;
+use crate::fit::FitState;
 use crate::geometry::Affine;
 use crate::plane::Plane;
 use crate::scene::Seeds;

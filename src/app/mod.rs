@@ -16,8 +16,8 @@ pub mod view;
 pub mod views;
 
 use crate::appearance::{Appearance, ClassMap, ForestParams, ProbabilityMaps};
+use crate::fit::FitState;
 use crate::fit::Model;
-use crate::fit::energy::FitState;
 use crate::fit::optimizer::Mode;
 use crate::fit::tracker::TrackedFrame;
 use crate::geometry::Affine;

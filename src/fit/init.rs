@@ -5,10 +5,11 @@
 //! the best few are refined by a coarse rigid fit and the most confident wins. The paper needed
 //! a rough manual placement; this needs none.
 
-use super::energy::{FitState, FrameContext, level_camera};
+use super::context::FrameContext;
 use super::model::Model;
 use super::optimizer::{FitParams, Mode, fit_frame};
 use super::probability::ViewProbabilities;
+use super::state::FitState;
 use crate::appearance::features::downsample;
 use crate::appearance::{Appearance, ClassMap};
 use crate::error::{Error, InputError};
@@ -92,8 +93,7 @@ pub fn automatic_pose(
         .iter()
         .zip(&small)
         .map(|(c, s)| {
-            level_camera(
-                c,
+            c.at_level(
                 &c.intrinsics,
                 LEVEL,
                 (s.width() as usize, s.height() as usize),

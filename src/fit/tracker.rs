@@ -6,11 +6,12 @@
 //! corrected while the pose is held where its motion before the zoom carries it
 //! ([`super::motion`]).
 
-use super::energy::{FitState, FrameContext};
+use super::context::FrameContext;
 use super::model::Model;
 use super::motion::MotionHistory;
 use super::optimizer::{FitParams, FrameFit, Mode, fit_frame};
 use super::probability::ViewProbabilities;
+use super::state::FitState;
 use super::zoom::ZoomDetector;
 use crate::appearance::{Appearance, ClassMap};
 use crate::error::Error;

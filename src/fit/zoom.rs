@@ -10,7 +10,7 @@
 //! or one frame by [`ZOOM_RATE_ONE_FRAME`], and stays on until the fitted focal length holds
 //! still for [`CALM_FRAMES`] frames.
 
-use super::energy::FitState;
+use super::state::FitState;
 use glam::DVec3;
 
 /// Apparent-size change over two frames changing the same way that counts as a zoom.

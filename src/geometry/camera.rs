@@ -51,6 +51,22 @@ pub struct Camera {
     pub extrinsics: Extrinsics,
 }
 
+/// Scale of pyramid level `level` relative to full resolution (each level halves the image).
+pub fn level_scale(level: usize) -> f64 {
+    1.0 / (1u32 << level) as f64
+}
+
+/// A full-resolution pixel position in an image scaled by `s`. Pixel centres lie at integer
+/// coordinates at every scale, so the map is (p + ½)·s − ½.
+pub fn pixel_at_scale(p: DVec2, s: f64) -> DVec2 {
+    (p + DVec2::splat(0.5)) * s - DVec2::splat(0.5)
+}
+
+/// The inverse of [`pixel_at_scale`]: a pixel of the image scaled by `s` at full resolution.
+pub fn pixel_from_scale(p: DVec2, s: f64) -> DVec2 {
+    (p + DVec2::splat(0.5)) / s - DVec2::splat(0.5)
+}
+
 /// Intermediate values of a projection, shared by the projection and its Jacobians.
 struct Distorted {
     xn: f64,
@@ -185,6 +201,19 @@ impl Intrinsics {
         n
     }
 
+    /// These intrinsics for the image scaled by `s` ([`pixel_at_scale`]: focal lengths scale,
+    /// the principal point keeps its pixel-centre convention; distortion acts on normalised
+    /// coordinates and does not change).
+    pub fn scaled(&self, s: f64) -> Intrinsics {
+        Intrinsics {
+            fx: self.fx * s,
+            fy: self.fy * s,
+            cx: (self.cx + 0.5) * s - 0.5,
+            cy: (self.cy + 0.5) * s - 0.5,
+            ..*self
+        }
+    }
+
     /// Parameters as an array in [`CORRECTED_INTRINSICS`] order.
     pub fn corrected(&self) -> [f64; 5] {
         [self.fx, self.fy, self.cx, self.cy, self.k1]
@@ -231,6 +260,17 @@ impl Camera {
             }
         }
         Some(out)
+    }
+
+    /// This camera with `intrinsics` (those a fit is correcting) at pyramid level `level`,
+    /// whose image is `size` pixels.
+    pub fn at_level(&self, intrinsics: &Intrinsics, level: usize, size: (usize, usize)) -> Camera {
+        Camera {
+            intrinsics: intrinsics.scaled(level_scale(level)),
+            width: size.0 as u32,
+            height: size.1 as u32,
+            ..self.clone()
+        }
     }
 
     /// Unit ray direction (camera-0 coordinates) and origin through a pixel.

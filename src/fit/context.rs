@@ -1,0 +1,120 @@
+//! What every term of the energy needs to know about one frame: the model (structures, joint
+//! shape model), the calibrated cameras, and which forest class each structure is seen as.
+//! Also the motion of a model point under each parameter block (eq. 2 and Table II for the
+//! affine, eq. 17 for the shape weights, rigid increments about the model centre), shared by the
+//! correspondence lines and the stereo term.
+
+use super::model::Model;
+use super::state::{Block, FitState};
+use crate::geometry::Affine;
+use glam::DVec3;
+
+/// Everything the energy needs about one frame.
+pub struct FrameContext<'a> {
+    pub model: &'a Model,
+    pub cameras: &'a [crate::geometry::Camera],
+    /// Forest class of each structure (None for hidden ones).
+    pub class_of: Vec<Option<usize>>,
+}
+
+impl<'a> FrameContext<'a> {
+    /// The context of a scene: its cameras, and the forest class of each visible structure.
+    pub fn new(model: &'a Model, scene: &'a crate::scene::Scene) -> Self {
+        let classes = crate::appearance::ClassMap::from_scene(scene);
+        let class_of = scene
+            .structures
+            .iter()
+            .map(|s| {
+                if s.visible {
+                    classes.class_of_label(s.label)
+                } else {
+                    None
+                }
+            })
+            .collect();
+        Self {
+            model,
+            cameras: &scene.cameras,
+            class_of,
+        }
+    }
+}
+
+impl FrameContext<'_> {
+    /// The structures with an image term (a forest class), in the order their render objects
+    /// take in the visibility rasters: a raster's object id `o` is structure `imaged()[o]`.
+    pub fn imaged(&self) -> Vec<usize> {
+        (0..self.model.structures.len())
+            .filter(|&i| self.class_of[i].is_some())
+            .collect()
+    }
+
+    /// ∂P/∂ξ (camera-0 coordinates, one column per parameter of `block`) of the model point
+    /// P = T(Σ wᵢ vᵢ(W)) made of `structure`'s deformed vertices with `weights`; `posed` is P
+    /// and `pre` its deformed preoperative position; rigid increments turn about
+    /// `rotation_centre`. The cameras do not move model points: empty for camera blocks.
+    #[allow(clippy::too_many_arguments)]
+    pub fn surface_jacobian(
+        &self,
+        structure: usize,
+        weights: &[(u32, f64)],
+        posed: DVec3,
+        pre: DVec3,
+        state: &FitState,
+        block: Block,
+        rotation_centre: DVec3,
+    ) -> Vec<DVec3> {
+        match block {
+            Block::Affine => {
+                // Table II.
+                let j = Affine::jacobian(pre);
+                (0..12)
+                    .map(|k| DVec3::new(j[0][k], j[1][k], j[2][k]))
+                    .collect()
+            }
+            Block::Rigid => {
+                // Increments about the current pose: P = R(δω)(P₀ − c₀) + c₀ + δt, where P₀ is
+                // the posed point; so ∂P/∂δω = −[P₀ − c₀]×, ∂P/∂δt = I (c₀: the model centre).
+                let q = posed - rotation_centre;
+                let mut out = Vec::with_capacity(6);
+                for k in 0..3 {
+                    let mut e = DVec3::ZERO;
+                    e[k] = 1.0;
+                    out.push(e.cross(q));
+                }
+                for k in 0..3 {
+                    let mut e = DVec3::ZERO;
+                    e[k] = 1.0;
+                    out.push(e);
+                }
+                out
+            }
+            Block::Shape => {
+                // Eq. 17: ∂P/∂w_k = R·u_k (R: the affine's linear part).
+                let lin = state.affine.linear();
+                let part = self.model.structures[structure].part;
+                (0..self.model.shape.mode_count())
+                    .map(|k| {
+                        let u = self.model.shape.mode_part(k, part);
+                        lin * weights
+                            .iter()
+                            .map(|&(v, w)| u[v as usize] * w)
+                            .sum::<DVec3>()
+                    })
+                    .collect()
+            }
+            Block::Cameras(_) => Vec::new(),
+        }
+    }
+
+    /// Centre about which rigid increments rotate: the anchor structure's vertex mean.
+    pub fn model_centre(&self, deformed: &[Vec<DVec3>]) -> DVec3 {
+        crate::geometry::mesh::vertex_mean(&deformed[self.model.anchor])
+    }
+
+    /// [`FrameContext::model_centre`] posed by `state`. A mean over the organ's vertices: taken
+    /// once per step, not once per line.
+    pub fn rotation_centre(&self, state: &FitState, deformed: &[Vec<DVec3>]) -> DVec3 {
+        state.affine.apply(self.model_centre(deformed))
+    }
+}

@@ -1,0 +1,183 @@
+//! Building the correspondence lines of a frame at the current state: the rim of every
+//! visible structure projected into every view, each rim point confirmed against a visibility
+//! raster (the structure front-most just inside, something else just outside), one line per
+//! 2×2 cell along the rim's image normal, and the forest's probabilities on its samples.
+
+use super::{EnergyParams, Line, Sample};
+use crate::appearance::Appearance;
+use crate::fit::context::FrameContext;
+use crate::fit::probability::ViewProbabilities;
+use crate::fit::state::FitState;
+use crate::render::raster::{RasterOptions, ViewRaster, rasterize};
+use glam::DVec2;
+use rayon::prelude::*;
+
+impl FrameContext<'_> {
+    /// Builds the lines of every view at the current state and fills their probabilities.
+    pub fn build_lines(
+        &self,
+        state: &FitState,
+        views: &mut [ViewProbabilities],
+        appearance: &Appearance,
+        params: &EnergyParams,
+    ) -> Vec<Line> {
+        self.build_lines_and_rasters(state, views, appearance, params)
+            .0
+    }
+
+    /// [`FrameContext::build_lines`], also returning each view's visibility raster of the
+    /// visible structures, one level coarser than `params.level` (the stereo term looks its
+    /// surface points up there instead of rendering again).
+    pub fn build_lines_and_rasters(
+        &self,
+        state: &FitState,
+        views: &mut [ViewProbabilities],
+        appearance: &Appearance,
+        params: &EnergyParams,
+    ) -> (Vec<Line>, Vec<ViewRaster>) {
+        let deformed = self.model.deformed(&state.shape);
+        let posed = self.model.posed(&state.affine, &deformed);
+        let visible = self.imaged();
+        // Views are independent: build their lines in parallel, then concatenate in view order.
+        let per_view: Vec<(Vec<Line>, ViewRaster)> = views
+            .par_iter_mut()
+            .zip(self.cameras.par_iter())
+            .enumerate()
+            .map(|(m, (view, cam))| {
+                let size = view.size(params.level);
+                let lcam = cam.at_level(&state.intrinsics[m], params.level, size);
+                let objects = self.model.objects(&posed, &visible);
+                // Visibility is judged one level coarser: a quarter of the pixels, and rim points
+                // only need "this structure just inside, something else just outside".
+                let vis_size = ((size.0 / 2).max(1), (size.1 / 2).max(1));
+                let vis_cam = cam.at_level(&state.intrinsics[m], params.level + 1, vis_size);
+                let raster = crate::fit::profile::time(crate::fit::profile::Phase::Raster, || {
+                    rasterize(&vis_cam, &objects, &RasterOptions::default())
+                });
+                let (vw, vh) = (vis_size.0 as i64, vis_size.1 as i64);
+                let centre = cam.extrinsics.center_mm();
+                let (w, h) = (size.0 as i64, size.1 as i64);
+                let mut taken = std::collections::HashSet::new();
+                let mut view_lines = Vec::new();
+                for (oi, &si) in visible.iter().enumerate() {
+                    let st = &self.model.structures[si];
+                    let verts = &posed[si];
+                    // Which faces look at the camera: once per face, not once per edge side.
+                    let facing: Vec<bool> = st
+                        .faces
+                        .iter()
+                        .map(|f| {
+                            let [a, b, c] = f.map(|k| verts[k as usize]);
+                            (b - a).cross(c - a).dot(a - centre) < 0.0
+                        })
+                        .collect();
+                    for e in st.edges.iter().filter(|e| !e.boundary) {
+                        let (f0, f1) = (facing[e.faces[0] as usize], facing[e.faces[1] as usize]);
+                        if f0 == f1 {
+                            continue;
+                        }
+                        let front = if f0 { e.faces[0] } else { e.faces[1] };
+                        let third = st.faces[front as usize]
+                            .iter()
+                            .copied()
+                            .find(|&k| k != e.a && k != e.b)
+                            .unwrap_or(e.a);
+                        let (Some(pa), Some(pb), Some(px)) = (
+                            lcam.project(verts[e.a as usize]),
+                            lcam.project(verts[e.b as usize]),
+                            lcam.project(verts[third as usize]),
+                        ) else {
+                            continue;
+                        };
+                        let t = 0.5;
+                        let p = verts[e.a as usize].lerp(verts[e.b as usize], t);
+                        let Some(c) = lcam.project(p) else { continue };
+                        let dir = pb - pa;
+                        if dir.length() < 1e-6 {
+                            continue;
+                        }
+                        let mut n = dir.perp().normalize();
+                        if n.dot(px - c) > 0.0 {
+                            n = -n;
+                        }
+                        // Confirm the rim point bounds the structure's visible region here.
+                        let pick = |q: DVec2| -> Option<usize> {
+                            let (x, y) = (q.x.round() as i64, q.y.round() as i64);
+                            (x >= 0 && y >= 0 && x < w && y < h).then(|| (y * w + x) as usize)
+                        };
+                        let pick_vis = |q: DVec2| -> Option<usize> {
+                            let q = (q + DVec2::splat(0.5)) * 0.5 - DVec2::splat(0.5);
+                            let (x, y) = (q.x.round() as i64, q.y.round() as i64);
+                            (x >= 0 && y >= 0 && x < vw && y < vh).then(|| (y * vw + x) as usize)
+                        };
+                        let (Some(inside), Some(outside)) =
+                            (pick_vis(c - n * 3.0), pick_vis(c + n * 3.0))
+                        else {
+                            continue;
+                        };
+                        if raster.object.data[inside] as usize != oi
+                            || raster.object.data[outside] as usize == oi
+                        {
+                            continue;
+                        }
+                        let depth = lcam.to_camera(p).z;
+                        if (raster.depth_mm.data[inside] as f64 - depth).abs() > 0.08 * depth {
+                            continue;
+                        }
+                        // One line per 2×2 cell: neighbouring rim points add little but cost.
+                        let cell = ((c.x / 2.0) as i64, (c.y / 2.0) as i64, si);
+                        if !taken.insert(cell) {
+                            continue;
+                        }
+                        let l = params.half_length as i64;
+                        let samples: Vec<Sample> = (-l..=l)
+                            .filter_map(|k| {
+                                let pos = c + n * k as f64;
+                                pick(pos).map(|i| Sample {
+                                    pos,
+                                    pixel: i as u32,
+                                    g_f: 0.0,
+                                    g_b: 0.0,
+                                    p_f: 0.0,
+                                })
+                            })
+                            .collect();
+                        if samples.len() < params.half_length {
+                            continue;
+                        }
+                        view_lines.push(Line {
+                            view: m,
+                            structure: si,
+                            a: e.a,
+                            b: e.b,
+                            t,
+                            normal: n,
+                            samples,
+                        });
+                    }
+                }
+                let pixels: Vec<u32> = view_lines
+                    .iter()
+                    .flat_map(|l| l.samples.iter().map(|s| s.pixel))
+                    .collect();
+                crate::fit::profile::time(crate::fit::profile::Phase::Probabilities, || {
+                    view.ensure(appearance, params.level, &pixels)
+                });
+                for line in &mut view_lines {
+                    let class = self.class_of[line.structure].unwrap_or(0);
+                    for s in &mut line.samples {
+                        let p = view
+                            .get(params.level, s.pixel, class)
+                            .clamp(params.probability_floor, 1.0 - params.probability_floor);
+                        s.p_f = p;
+                        s.g_f = -p.ln();
+                        s.g_b = -(1.0 - p).ln();
+                    }
+                }
+                (view_lines, raster)
+            })
+            .collect();
+        let (lines, rasters): (Vec<Vec<Line>>, Vec<ViewRaster>) = per_view.into_iter().unzip();
+        (lines.into_iter().flatten().collect(), rasters)
+    }
+}

@@ -1,0 +1,179 @@
+//! What one correspondence line says about where its contour should be: the softmin target
+//! shift over its 1D energy profile and how certain that is (the Laplace approximation the
+//! Gauss–Newton step weighs it by), in the style of SRT3D/ICG; and the fit's confidence, read
+//! off the lines at the optimum.
+
+use super::{EnergyParams, Line};
+use crate::fit::context::FrameContext;
+use crate::fit::state::FitState;
+use glam::DVec2;
+
+/// Variance (level px²) of a line whose best shift lies at the end of its search range: as
+/// loose as a σ = 2 px edge, where a clean edge's parabola gives σ ≈ 0.15–0.5 px.
+const SATURATED_LINE_VARIANCE_PX2: f64 = 4.0;
+
+/// A line's softmin target shift (level px) and its variance, from its 1D energy profile.
+pub fn line_target(line: &Line, c: DVec2, ep: &EnergyParams) -> (f64, f64) {
+    let r = (ep.half_length / 2) as i64;
+    // Samples lie one pixel apart along the normal, so every (sample, shift) pair sees the
+    // Heaviside at t₀ + m for an integer m: evaluate those few once instead of per pair.
+    let Some(first) = line.samples.first() else {
+        return (0.0, f64::INFINITY);
+    };
+    let t0 = line.normal.dot(c - first.pos);
+    let offsets: Vec<i64> = line
+        .samples
+        .iter()
+        .map(|s| (line.normal.dot(c - s.pos) - t0).round() as i64)
+        .collect();
+    let lo = offsets.iter().copied().min().unwrap_or(0) - r;
+    let hi = offsets.iter().copied().max().unwrap_or(0) + r;
+    let heaviside: Vec<f64> = (lo..=hi)
+        .map(|m| 1.0 / (1.0 + (-(t0 + m as f64) / ep.heaviside_px).exp()))
+        .collect();
+    let profile: Vec<f64> = (-r..=r)
+        .map(|delta| {
+            line.samples
+                .iter()
+                .zip(&offsets)
+                .map(|(s, &m)| {
+                    let h = heaviside[(m + delta - lo) as usize];
+                    s.g_f as f64 * h + s.g_b as f64 * (1.0 - h)
+                })
+                .sum()
+        })
+        .collect();
+    let min = profile.iter().cloned().fold(f64::INFINITY, f64::min);
+    let weights: Vec<f64> = profile.iter().map(|e| (-(e - min)).exp()).collect();
+    let total: f64 = weights.iter().sum();
+    let mean = weights
+        .iter()
+        .enumerate()
+        .map(|(i, w)| w * (i as i64 - r) as f64)
+        .sum::<f64>()
+        / total;
+    let var = weights
+        .iter()
+        .enumerate()
+        .map(|(i, w)| w * ((i as i64 - r) as f64 - mean).powi(2))
+        .sum::<f64>()
+        / total;
+    // Close to the optimum the softmin collapses onto one integer shift and loses the sub-pixel
+    // offset the smooth energy still sees: refine with a parabola through the neighbours of
+    // the best shift, weighted by its curvature (Laplace approximation).
+    let k = profile
+        .iter()
+        .enumerate()
+        .min_by(|a, b| a.1.total_cmp(b.1))
+        .map(|(i, _)| i)
+        .unwrap_or(r as usize);
+    // Best at the end of the range: the line only says "at least r further". That is what a
+    // tool over the organ's rim looks like (background all along the line), and it must not
+    // pull as firmly as a clean edge does (measured: seed 5's hidden-tumour error 4.72 →
+    // 3.68 mm, seed 6's LS Dice 0.907 → 0.944).
+    if k == 0 || k + 1 == profile.len() {
+        return (k as f64 - r as f64, SATURATED_LINE_VARIANCE_PX2);
+    }
+    if var < 1.0 {
+        let (em, e0, ep) = (profile[k - 1], profile[k], profile[k + 1]);
+        let curvature = em - 2.0 * e0 + ep;
+        if curvature > 1e-9 {
+            let offset = (0.5 * (em - ep) / curvature).clamp(-0.5, 0.5);
+            return (
+                k as f64 - r as f64 + offset,
+                (1.0 / curvature).clamp(0.02, 4.0),
+            );
+        }
+    }
+    (mean, var.max(0.25))
+}
+
+/// Mean p_f just inside minus just outside the fitted contours, over lines, clamped to [0, 1].
+pub fn confidence(lines: &[Line], state: &FitState, ctx: &FrameContext, ep: &EnergyParams) -> f64 {
+    let deformed = ctx.model.deformed(&state.shape);
+    let mut sum = 0.0;
+    let mut n = 0usize;
+    for line in lines {
+        let Some(c) = ctx.contour_point(line, state, &deformed, ep.level) else {
+            continue;
+        };
+        let (mut pin, mut nin, mut pout, mut nout) = (0.0, 0, 0.0, 0);
+        for s in &line.samples {
+            let dist = line.normal.dot(c - s.pos);
+            if dist > 1.5 {
+                pin += s.p_f as f64;
+                nin += 1;
+            } else if dist < -1.5 {
+                pout += s.p_f as f64;
+                nout += 1;
+            }
+        }
+        if nin > 0 && nout > 0 {
+            sum += pin / nin as f64 - pout / nout as f64;
+            n += 1;
+        }
+    }
+    if n == 0 {
+        0.0
+    } else {
+        (sum / n as f64).clamp(0.0, 1.0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::Sample;
+    use super::*;
+
+    /// A horizontal line through c = (20, 5) with outward normal +x, one sample per pixel from
+    /// −10 to +10 px, and the forest's p_f at offset k given by `p`.
+    fn line(p: impl Fn(i64) -> f32) -> (Line, DVec2) {
+        let c = DVec2::new(20.0, 5.0);
+        let samples = (-10..=10)
+            .map(|k| {
+                let p_f = p(k);
+                Sample {
+                    pos: c + DVec2::X * k as f64,
+                    pixel: 0,
+                    g_f: -p_f.ln(),
+                    g_b: -(1.0 - p_f).ln(),
+                    p_f,
+                }
+            })
+            .collect();
+        let line = Line {
+            view: 0,
+            structure: 0,
+            a: 0,
+            b: 1,
+            t: 0.5,
+            normal: DVec2::X,
+            samples,
+        };
+        (line, c)
+    }
+
+    #[test]
+    fn a_clean_edge_gives_its_shift_with_a_tight_variance() {
+        // The organ reaches two pixels beyond the contour.
+        let (l, c) = line(|k| if k <= 2 { 0.98 } else { 0.02 });
+        let (target, var) = line_target(&l, c, &EnergyParams::default());
+        assert!((target - 2.5).abs() < 0.6, "target {target}");
+        assert!(var < SATURATED_LINE_VARIANCE_PX2 / 4.0, "variance {var}");
+    }
+
+    #[test]
+    fn a_line_all_background_pulls_only_loosely() {
+        // A tool lying over the rim: nothing of the organ anywhere on the line. The best shift
+        // is the end of the range, and it says only "at least that far".
+        let (l, c) = line(|_| 0.02);
+        let (target, var) = line_target(&l, c, &EnergyParams::default());
+        assert_eq!(target, -5.0);
+        assert_eq!(var, SATURATED_LINE_VARIANCE_PX2);
+        // All organ: the other end, just as loose.
+        let (l, c) = line(|_| 0.98);
+        let (target, var) = line_target(&l, c, &EnergyParams::default());
+        assert_eq!(target, 5.0);
+        assert_eq!(var, SATURATED_LINE_VARIANCE_PX2);
+    }
+}
