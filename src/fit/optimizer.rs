@@ -182,7 +182,8 @@ pub fn step(
     }
     let priors = add_priors(ctx, state, prev, block, centre, params, &mut eq);
     let cholesky = eq.h.clone().cholesky()?;
-    // Accept only steps that lower the objective on these lines and matches.
+    // Accept only steps that lower the objective: the image terms on these lines and matches
+    // plus the priors just added, the very energy the normal equations approximate.
     let objective = |st: &FitState| {
         let moved;
         let d = if block == Block::Shape {
@@ -191,7 +192,7 @@ pub fn step(
         } else {
             &deformed
         };
-        terms.iter().map(|t| t.energy(st, d)).sum::<f64>() + priors.accepted_energy(st)
+        terms.iter().map(|t| t.energy(st, d)).sum::<f64>() + priors.energy(st)
     };
     let before = objective(state);
     let try_step = |delta: &DVector<f64>, tries: usize| -> Option<FitState> {
@@ -236,9 +237,6 @@ pub fn step(
 
 /// The priors of one step on one block, added to the normal equations in a fixed order (each
 /// scaled to the curvature accumulated before it).
-// Until the next commit the step accepts on the shape prior alone, as before: the other
-// priors' energies are never read (the defect the compiler points at).
-#[allow(dead_code)]
 enum BlockPriors<'a> {
     None,
     Rigid(PoseDamping),
@@ -248,12 +246,17 @@ enum BlockPriors<'a> {
 }
 
 impl BlockPriors<'_> {
-    /// The priors' energy the step is accepted on.
-    fn accepted_energy(&self, state: &FitState) -> f64 {
+    /// The priors' total energy at `state`: the part of the objective whose curvature they
+    /// added to the normal equations. (Until this was the whole sum, steps were accepted on the
+    /// shape prior alone: a step could raise the pose, strain or camera priors' energy, and so
+    /// the objective being minimised, and still be taken.)
+    fn energy(&self, state: &FitState) -> f64 {
         match self {
-            // Only the shape prior: what the step accepted on before the priors were types.
-            BlockPriors::Shape(shape) => shape.mahalanobis_energy(state),
-            _ => 0.0,
+            BlockPriors::None => 0.0,
+            BlockPriors::Rigid(pose) => pose.energy(state),
+            BlockPriors::Affine(pose, strain) => pose.energy(state) + strain.energy(state),
+            BlockPriors::Shape(shape) => shape.energy(state),
+            BlockPriors::Cameras(cameras) => cameras.energy(state),
         }
     }
 }

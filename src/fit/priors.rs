@@ -258,3 +258,104 @@ impl Prior for CameraDamping {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fit::state::apply_increment;
+    use crate::geometry::Intrinsics;
+    use crate::geometry::pose::rotation_from_vector;
+
+    /// A state off `previous` in every block, and a curvature matrix with distinct diagonals.
+    fn states() -> (FitState, FitState, DMatrix<f64>) {
+        let previous = FitState {
+            affine: Affine::from_linear_translation(
+                rotation_from_vector(DVec3::new(0.1, -0.2, 0.05)),
+                DVec3::new(3.0, -2.0, 180.0),
+            ),
+            shape: vec![0.4, -1.0, 0.2],
+            intrinsics: vec![Intrinsics::pinhole(1000.0, 1001.0, 480.0, 270.0)],
+        };
+        let mut state = previous.clone();
+        let stretch = DMat3::from_diagonal(DVec3::new(1.03, 0.98, 1.01));
+        state.affine = Affine::from_linear_translation(
+            stretch * rotation_from_vector(DVec3::new(0.12, -0.21, 0.04)),
+            DVec3::new(3.5, -1.0, 183.0),
+        );
+        state.shape = vec![1.0, -0.5, -0.3];
+        state.intrinsics[0] =
+            state.intrinsics[0].with_corrected([1012.0, 1009.0, 483.0, 268.0, -0.01]);
+        let h = DMatrix::from_fn(12, 12, |r, c| if r == c { 1.0 + r as f64 } else { 0.3 });
+        (state, previous, h)
+    }
+
+    /// −b of the prior's normal equations against central differences of its energy over
+    /// increments of `block`; `tolerance` relative to the largest component.
+    fn check(prior: &dyn Prior, state: &FitState, block: Block, n: usize, tolerance: f64) {
+        let mut eq = NormalEquations::zeros(n);
+        prior.add_normal_equations(state, &mut eq);
+        let centre = DVec3::new(1.0, 2.0, -3.0);
+        let fd: Vec<f64> = (0..n)
+            .map(|k| {
+                let h = 1e-6;
+                let mut d = vec![0.0; n];
+                d[k] = h;
+                let plus = prior.energy(&apply_increment(state, block, &d, centre));
+                d[k] = -h;
+                let minus = prior.energy(&apply_increment(state, block, &d, centre));
+                (plus - minus) / (2.0 * h)
+            })
+            .collect();
+        let scale = fd.iter().map(|v| v.abs()).fold(0.0, f64::max);
+        assert!(scale > 1e-6, "{block:?}: the prior's gradient vanishes");
+        for k in 0..n {
+            assert!(
+                (-eq.b[k] - fd[k]).abs() <= tolerance * scale,
+                "{block:?}[{k}]: normal equations say {} , central differences {}",
+                -eq.b[k],
+                fd[k]
+            );
+            // A parameter the prior pulls on has curvature (the strain prior leaves q10…q12).
+            assert!(
+                eq.h[(k, k)] > 0.0 || fd[k].abs() < 1e-9,
+                "{block:?}[{k}]: a gradient but no curvature"
+            );
+        }
+    }
+
+    /// Each prior's energy is the quadratic whose gradient and curvature it adds to the normal
+    /// equations: the step that accepts on the energy minimises what it solves for.
+    #[test]
+    fn priors_add_the_gradient_of_their_own_energy() {
+        let (state, previous, h) = states();
+        let centre = DVec3::new(1.0, 2.0, -3.0);
+        let affine = PoseDamping::new(Block::Affine, &previous, centre, 0.7, &h).unwrap();
+        check(&affine, &state, Block::Affine, 12, 1e-6);
+        check(&StrainPrior::new(1.3, &h), &state, Block::Affine, 12, 1e-5);
+        let sigma = [2.0, 1.0, 0.5];
+        let shape = ShapePrior::new(2.0, &sigma, &previous, 0.5, &h);
+        check(&shape, &state, Block::Shape, 3, 1e-6);
+        check(
+            &CameraDamping::new(&previous, 0.01, &h),
+            &state,
+            Block::Cameras(1),
+            5,
+            1e-6,
+        );
+        // The rigid block's rotation deviation is taken to move one for one with the increment:
+        // exact at zero deviation, off by O(|deviation|²) elsewhere (here 0.015 rad).
+        let rigid = PoseDamping::new(Block::Rigid, &previous, centre, 0.7, &h).unwrap();
+        let mut near = previous.clone();
+        near.affine = Affine::from_linear_translation(
+            rotation_from_vector(DVec3::new(0.01, -0.01, 0.005)) * previous.affine.linear(),
+            previous.affine.translation_mm() + DVec3::new(0.5, -0.2, 1.0),
+        );
+        check(&rigid, &near, Block::Rigid, 6, 1e-3);
+        // And none of them has energy at the state it pulls towards.
+        assert_eq!(affine.energy(&previous), 0.0);
+        assert_eq!(
+            CameraDamping::new(&previous, 1.0, &h).energy(&previous),
+            0.0
+        );
+    }
+}
