@@ -6,7 +6,7 @@
 
 use super::model::Model;
 use super::state::{Block, FitState};
-use crate::geometry::Affine;
+use crate::geometry::{Affine, RigidPose};
 use glam::DVec3;
 
 /// Everything the energy needs about one frame.
@@ -74,20 +74,12 @@ impl FrameContext<'_> {
             }
             Block::Rigid => {
                 // Increments about the current pose: P = R(δω)(P₀ − c₀) + c₀ + δt, where P₀ is
-                // the posed point; so ∂P/∂δω = −[P₀ − c₀]×, ∂P/∂δt = I (c₀: the model centre).
-                let q = posed - rotation_centre;
-                let mut out = Vec::with_capacity(6);
-                for k in 0..3 {
-                    let mut e = DVec3::ZERO;
-                    e[k] = 1.0;
-                    out.push(e.cross(q));
-                }
-                for k in 0..3 {
-                    let mut e = DVec3::ZERO;
-                    e[k] = 1.0;
-                    out.push(e);
-                }
-                out
+                // the posed point and c₀ the model centre: the rigid pose's Jacobian at zero
+                // rotation, unit scale, applied to P₀ − c₀ (∂P/∂δω = −[P₀ − c₀]×, ∂P/∂δt = I).
+                let j = RigidPose::default().jacobian(posed - rotation_centre);
+                (0..6)
+                    .map(|k| DVec3::new(j[0][k], j[1][k], j[2][k]))
+                    .collect()
             }
             Block::Shape => {
                 // Eq. 17: ∂P/∂w_k = R·u_k (R: the affine's linear part).

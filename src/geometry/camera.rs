@@ -249,7 +249,16 @@ impl Camera {
 
     /// Jacobian of the pixel with respect to the reference-frame point: J_proj · R_m.
     pub fn jacobian_ref_point(&self, p_ref: DVec3) -> Option<[[f64; 3]; 2]> {
-        let j = self.intrinsics.jacobian_point(self.to_camera(p_ref))?;
+        self.jacobian_ref_point_with(&self.intrinsics, p_ref)
+    }
+
+    /// [`Camera::jacobian_ref_point`] under other intrinsics (those a fit is correcting).
+    pub fn jacobian_ref_point_with(
+        &self,
+        intrinsics: &Intrinsics,
+        p_ref: DVec3,
+    ) -> Option<[[f64; 3]; 2]> {
+        let j = intrinsics.jacobian_point(self.to_camera(p_ref))?;
         let r = self.extrinsics.rotation;
         let mut out = [[0.0; 3]; 2];
         for (row, jr) in out.iter_mut().zip(j.iter()) {

@@ -172,14 +172,12 @@ impl FrameContext<'_> {
         let (p, pre) = self.rim_point(line, state, deformed);
         let s = level_scale(level);
         let pc = cam.to_camera(p);
-        let jp = intr.jacobian_point(pc)?;
-        // d pixel / d reference point = J_proj · R_m.
-        let r = cam.extrinsics.rotation;
+        // d pixel / d reference point = J_proj · R_m (eq. 10–11), at the line's level.
+        let jr = cam.jacobian_ref_point_with(intr, p)?;
         let jref = |v: DVec3| -> [f64; 2] {
-            let w = r * v;
             [
-                s * (jp[0][0] * w.x + jp[0][1] * w.y + jp[0][2] * w.z),
-                s * (jp[1][0] * w.x + jp[1][1] * w.y + jp[1][2] * w.z),
+                s * (jr[0][0] * v.x + jr[0][1] * v.y + jr[0][2] * v.z),
+                s * (jr[1][0] * v.x + jr[1][1] * v.y + jr[1][2] * v.z),
             ]
         };
         Some(match block {
