@@ -4,7 +4,7 @@
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 use endofuse::Error;
-use endofuse::fit::Model;
+use endofuse::fit::{FitConfig, Model};
 use endofuse::synth::SynthOptions;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -54,6 +54,10 @@ enum Command {
         /// Inclusive 0-based frame range, e.g. 0..29 (default: all frames).
         #[arg(long)]
         frames: Option<String>,
+        /// The fit's tuning constants: a JSON FitConfig (missing keys take their defaults) or
+        /// the metrics.json of an earlier run (its `config.fit`), to reproduce it.
+        #[arg(long)]
+        config: Option<PathBuf>,
     },
     /// Write a synthetic stereo endoscopic phantom scene with ground truth.
     Synth {
@@ -162,13 +166,19 @@ fn run(cli: Cli) -> Result<()> {
             out,
             mode,
             frames,
+            config,
         }) => {
+            let config = match config {
+                Some(path) => read_fit_config(&path)?,
+                None => FitConfig::default(),
+            };
             let mode = endofuse::fit::Mode::parse(&mode).ok_or_else(|| {
                 endofuse::InputError::new("--mode", format!("'{mode}' is not one of R, L, LS, LSC"))
             })?;
             let scene = endofuse::open::scene(&scene)?;
             let range = frame_range(frames.as_deref(), scene.frame_count)?;
-            let m = endofuse::track::run(&scene, &out, mode, range, None, &progress("track"))?;
+            let m =
+                endofuse::track::run(&scene, &out, mode, range, &config, None, &progress("track"))?;
             if let Some(r) = endofuse::fit::profile::report(m.frames) {
                 eprintln!("track: {r}");
             }
@@ -242,6 +252,16 @@ fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
     }
+}
+
+/// Reads `track --config FILE`.
+fn read_fit_config(path: &std::path::Path) -> Result<FitConfig> {
+    let bad = |problem: String| endofuse::InputError::new(path, problem);
+    let text = std::fs::read_to_string(path).map_err(|e| bad(format!("cannot read: {e}")))?;
+    Ok(
+        FitConfig::from_json(&text)
+            .map_err(|e| bad(format!("malformed fit configuration: {e}")))?,
+    )
 }
 
 /// Opens the desktop app (blocks until its window closes).

@@ -6,7 +6,7 @@
 use crate::appearance::{Appearance, ForestParams};
 use crate::error::{Error, InputError};
 use crate::fit::Model;
-use crate::fit::optimizer::Mode;
+use crate::fit::config::{FitConfig, Mode, ResolvedConfig};
 use crate::fit::tracker::{TrackOptions, TrackedFrame, initial_state, track};
 use crate::plane::dice;
 use crate::scene::labels::read_label_png;
@@ -63,6 +63,10 @@ pub struct TrackMetrics {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub camera: Option<CameraMetrics>,
     pub timing: Timing,
+    /// The fit's configuration and what it resolved to, so the run can be reproduced
+    /// (`track --config metrics.json`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub config: Option<ResolvedConfig>,
 }
 
 fn mean(v: &[f64]) -> f64 {
@@ -82,12 +86,14 @@ fn percentile(v: &[f64], q: f64) -> f64 {
     s[((s.len() - 1) as f64 * q).round() as usize]
 }
 
-/// Runs the whole command; `progress(done, total)` as frames finish.
+/// Runs the whole command with the fit configured by `config`; `progress(done, total)` as
+/// frames finish.
 pub fn run(
     scene: &Scene,
     out: &Path,
     mode: Mode,
     frames: (usize, usize),
+    config: &FitConfig,
     cancel: Option<&AtomicBool>,
     progress: &dyn Fn(usize, usize),
 ) -> Result<TrackMetrics, Error> {
@@ -95,12 +101,14 @@ pub fn run(
     let model = Model::build(scene)?;
     let affine = match scene.initial_pose {
         Some(a) => a,
-        None => crate::fit::init::automatic_pose(scene, &model, &appearance, frames.0)?,
+        None => crate::fit::init::automatic_pose(scene, &model, &appearance, config, frames.0)?,
     };
     let start = initial_state(scene, &model, affine);
-    let options = TrackOptions::new(mode, frames, scene.cameras[0].width);
+    let options =
+        TrackOptions::new(mode, frames, scene.cameras[0].width).with_config(config.clone());
     let total = frames.1 + 1 - frames.0;
     let mut recorder = Recorder::new(scene, out, mode);
+    recorder.config = Some(options.config.resolved(mode, options.fit_level()));
     track(
         scene,
         &model,
@@ -156,6 +164,8 @@ pub struct Recorder<'a> {
     lost_frames: usize,
     /// Also write overlay PNGs (`overlay/{camera}/{frame}.png`), as the app's export does.
     pub overlays: bool,
+    /// The configuration the frames were fitted with, for metrics.json.
+    pub config: Option<ResolvedConfig>,
 }
 
 impl<'a> Recorder<'a> {
@@ -177,6 +187,7 @@ impl<'a> Recorder<'a> {
             ms: Vec::new(),
             lost_frames: 0,
             overlays: false,
+            config: None,
         }
     }
 
@@ -333,6 +344,7 @@ impl<'a> Recorder<'a> {
                     p95: percentile(&self.ms, 0.95),
                 },
             },
+            config: self.config,
         };
         write_json_atomic(&self.out.join("metrics.json"), &metrics)?;
         Ok(metrics)

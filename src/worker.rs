@@ -7,7 +7,7 @@
 use crate::appearance::{Appearance, ForestParams, ProbabilityMaps};
 use crate::error::Error;
 use crate::fit::Model;
-use crate::fit::optimizer::Mode;
+use crate::fit::config::{FitConfig, Mode};
 use crate::fit::tracker::{TrackOptions, TrackedFrame, initial_state, track};
 use crate::geometry::Affine;
 use crate::scene::{Scene, Seeds};
@@ -108,6 +108,8 @@ struct State {
     /// The model of the scene's structures (seeds change the scene, never its structures).
     model: Option<Arc<Model>>,
     appearance: Option<Arc<Appearance>>,
+    /// The fit's configuration for placing and tracking.
+    config: FitConfig,
 }
 
 impl Worker {
@@ -125,6 +127,7 @@ impl Worker {
                     scene: None,
                     model: None,
                     appearance: None,
+                    config: FitConfig::default(),
                 };
                 for (id, command) in inbox {
                     if matches!(command, Command::Shutdown) {
@@ -287,7 +290,13 @@ fn run(
             let scene = need_scene(state)?;
             let appearance = need_appearance(state)?;
             let model = need_model(state)?;
-            let affine = crate::fit::init::automatic_pose(&scene, &model, &appearance, frame)?;
+            let affine = crate::fit::init::automatic_pose(
+                &scene,
+                &model,
+                &appearance,
+                &state.config,
+                frame,
+            )?;
             let _ = out.send(Event::Initialised(affine));
         }
         Command::Track {
@@ -311,9 +320,16 @@ fn run(
             let model = need_model(state)?;
             let affine = match start.or(scene.initial_pose) {
                 Some(a) => a,
-                None => crate::fit::init::automatic_pose(&scene, &model, &appearance, frames.0)?,
+                None => crate::fit::init::automatic_pose(
+                    &scene,
+                    &model,
+                    &appearance,
+                    &state.config,
+                    frames.0,
+                )?,
             };
             let options = TrackOptions::new(mode, frames, scene.cameras[0].width)
+                .with_config(state.config.clone())
                 .with_cancel(Some(cancel.clone()));
             let total = frames.1 + 1 - frames.0;
             let mut done = 0;

@@ -309,3 +309,49 @@ fn tracking_overlay_picture() {
     assert!(m["dice"]["mean"].as_f64().unwrap() > 0.9, "{m}");
     let _ = std::fs::remove_dir_all(&out);
 }
+
+/// metrics.json records the fit's configuration and what it resolved to; given back with
+/// `--config` it reproduces the run exactly, and a changed constant changes the fit.
+#[test]
+fn a_run_is_reproduced_from_its_metrics_and_its_config_is_honoured() {
+    let scene = synth("config", &[]);
+    let (first, again, changed) = (tmp("config-1"), tmp("config-2"), tmp("config-3"));
+    let args = ["--mode", "LS", "--frames", "0..2"];
+    track_ok(&scene, &first, &args);
+    let metrics = json(&first.join("metrics.json"));
+    let config = &metrics["config"];
+    assert_eq!(config["mode"], "LS");
+    assert_eq!(config["fit"]["priors"]["shape"], 2.0);
+    assert_eq!(config["resolved"]["tracked_frame"]["priors"]["shape"], 8.0);
+    assert!(config["resolved"]["first_frame"]["levels"].is_array());
+    let metrics_path = first.join("metrics.json");
+    let mut with_config = args.to_vec();
+    with_config.extend(["--config", metrics_path.to_str().unwrap()]);
+    track_ok(&scene, &again, &with_config);
+    let frames = |dir: &Path| json(&dir.join("trajectory.json"))["frames"].clone();
+    let strip_ms = |mut v: serde_json::Value| {
+        for f in v.as_array_mut().unwrap() {
+            f.as_object_mut().unwrap().remove("ms");
+        }
+        v
+    };
+    assert_eq!(strip_ms(frames(&first)), strip_ms(frames(&again)));
+    // A much stronger shape prior is a different fit.
+    let stiff = changed.with_extension("json");
+    std::fs::create_dir_all(stiff.parent().unwrap()).unwrap();
+    std::fs::write(&stiff, r#"{"tracked_frame": {"shape_prior": 5000.0}}"#).unwrap();
+    let mut stiff_args = args.to_vec();
+    stiff_args.extend(["--config", stiff.to_str().unwrap()]);
+    track_ok(&scene, &changed, &stiff_args);
+    assert_ne!(strip_ms(frames(&first)), strip_ms(frames(&changed)));
+    // A malformed configuration is bad input, named.
+    std::fs::write(&stiff, r#"{"priors": {"shape": "strong"}}"#).unwrap();
+    let run = track(&scene, &tmp("config-4"), &stiff_args);
+    assert_eq!(run.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(
+        err.contains(stiff.to_str().unwrap()) && err.contains("fit configuration"),
+        "{err}"
+    );
+    assert_eq!(err.lines().count(), 1, "{err}");
+}

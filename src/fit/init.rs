@@ -5,9 +5,10 @@
 //! the best few are refined by a coarse rigid fit and the most confident wins. The paper needed
 //! a rough manual placement; this needs none.
 
+use super::config::{FitConfig, Mode, Phase, Zoom};
 use super::context::FrameContext;
 use super::model::Model;
-use super::optimizer::{FitParams, Mode, fit_frame};
+use super::optimizer::fit_frame;
 use super::probability::ViewProbabilities;
 use super::state::FitState;
 use crate::appearance::features::downsample;
@@ -20,9 +21,6 @@ use crate::render::raster::{RasterOptions, ViewRaster, rasterize};
 use crate::scene::Scene;
 use glam::{DMat3, DVec2, DVec3};
 use std::sync::Arc;
-
-const LEVEL: usize = 2;
-const REFINED: usize = 6;
 
 /// Unit directions spread over the sphere (Fibonacci lattice).
 fn directions(n: usize) -> Vec<DVec3> {
@@ -74,17 +72,22 @@ fn soft_iou(prob: &Plane<f32>, silhouette: &Plane<bool>) -> f64 {
     inter / (sp + ss - inter).max(1e-9)
 }
 
-/// Estimates the pose of frame `t` from the forest alone.
+/// Estimates the pose of frame `t` from the forest alone, with `config.placement`.
 pub fn automatic_pose(
     scene: &Scene,
     model: &Model,
     appearance: &Appearance,
+    config: &FitConfig,
     t: usize,
 ) -> Result<Affine, Error> {
+    let placement = &config.placement;
     let frames: Vec<Arc<image::RgbImage>> = (0..scene.cameras.len())
         .map(|c| scene.frame(c, t))
         .collect::<Result<_, _>>()?;
-    let small: Vec<image::RgbImage> = frames.iter().map(|f| downsample(&downsample(f))).collect();
+    let small: Vec<image::RgbImage> = frames
+        .iter()
+        .map(|f| (0..placement.score_level).fold(f.as_ref().clone(), |img, _| downsample(&img)))
+        .collect();
     let (probs, per_class): (Vec<Plane<f32>>, Vec<Vec<Plane<f32>>>) =
         small.iter().map(|f| class_planes(appearance, f)).unzip();
     let classes = ClassMap::from_scene(scene);
@@ -95,7 +98,7 @@ pub fn automatic_pose(
         .map(|(c, s)| {
             c.at_level(
                 &c.intrinsics,
-                LEVEL,
+                placement.score_level,
                 (s.width() as usize, s.height() as usize),
             )
         })
@@ -144,10 +147,10 @@ pub fn automatic_pose(
         Affine::from_linear_translation(rot, ray * depth - rot * centre_pre)
     };
     let mut scored: Vec<(f64, Affine)> = Vec::new();
-    for d in directions(26) {
-        for roll in 0..8 {
-            let rot =
-                rotation_from_vector(d * (roll as f64 * std::f64::consts::FRAC_PI_4)) * align_z(d);
+    let roll_angle = std::f64::consts::TAU / placement.rolls.max(1) as f64;
+    for d in directions(placement.directions) {
+        for roll in 0..placement.rolls {
+            let rot = rotation_from_vector(d * (roll as f64 * roll_angle)) * align_z(d);
             // Depth from the area: projected area falls with the square of depth.
             let z_ref = 200.0;
             let reference = rasters(&place(rot, z_ref), &cams[..1]);
@@ -162,28 +165,20 @@ pub fn automatic_pose(
     scored.sort_by(|a, b| b.0.total_cmp(&a.0));
     // Refine the best few rigidly at coarse levels; keep the most confident.
     let ctx = FrameContext::new(model, scene);
-    // A hypothesis is only a guess: hold it lightly so the refinement can turn it by the
-    // ~20° between neighbouring hypotheses.
-    let params = FitParams {
-        mode: Mode::R,
-        levels: vec![2, 1, 0],
-        rounds: 4,
-        steps: 3,
-        pose_damping: 0.05,
-        ..FitParams::default()
-    };
+    let params = config.resolve(Mode::R, Phase::Placement, Zoom::Off, 0);
+    let pyramid = params.levels.iter().max().map_or(1, |l| l + 1);
     let mut best: Option<(f64, Affine)> = None;
-    for (_, affine) in scored.into_iter().take(REFINED) {
+    for (_, affine) in scored.into_iter().take(placement.refined) {
         let mut views: Vec<ViewProbabilities> = frames
             .iter()
-            .map(|f| ViewProbabilities::new(f.clone(), 3, classes.len()))
+            .map(|f| ViewProbabilities::new(f.clone(), pyramid, classes.len()))
             .collect();
         let start = FitState {
             affine,
             shape: vec![0.0; model.shape.mode_count()],
             intrinsics: scene.cameras.iter().map(|c| c.intrinsics).collect(),
         };
-        let fit = fit_frame(&ctx, &start, &start, &mut views, appearance, &params, false);
+        let fit = fit_frame(&ctx, &start, &start, &mut views, appearance, &params);
         if best.as_ref().is_none_or(|(c, _)| fit.confidence > *c) {
             best = Some((fit.confidence, fit.state.affine));
         }

@@ -5,35 +5,35 @@
 //! like the organ sliding sideways. Holding the pose where the last frame left it hands the
 //! organ's own motion (breathing moves it millimetres in a third of a second) to the
 //! intrinsics. Breathing is slow against the frame rate, so the motion measured just before
-//! the zoom, carried on, is where the pose is held instead.
+//! the zoom, carried on, is where the pose is held instead. How many frames the velocity is
+//! fitted over and how far it carries are [`MotionConfig`]'s.
 
+use super::config::MotionConfig;
 use crate::geometry::Affine;
 use std::collections::VecDeque;
-
-/// Frames after the history's last pose that its velocity still carries the pose: breathing
-/// (a period of seconds) is close to linear over a third of a second, not over a second.
-/// Longer zooms hold the pose where the carrying stopped (a 27-frame zoom at seed 41: hidden
-/// tumour 3.54 → 3.44 mm; marked zooms of the usual 9 frames are not affected).
-pub const CARRY_FRAMES: usize = 12;
-
-/// Frames the velocity is fitted over (at 30 fps a fifth of a second: breathing, with a period
-/// of seconds, is close to linear over it, and pose jitter averages out).
-pub const HISTORY_FRAMES: usize = 6;
 
 /// The last few tracked poses, with their frame numbers.
 #[derive(Debug, Clone, Default)]
 pub struct MotionHistory {
+    config: MotionConfig,
     poses: VecDeque<(usize, Affine)>,
 }
 
 impl MotionHistory {
+    pub fn new(config: MotionConfig) -> Self {
+        Self {
+            config,
+            poses: VecDeque::new(),
+        }
+    }
+
     /// Records the pose fitted at `frame` (frames must come in increasing order).
     pub fn push(&mut self, frame: usize, pose: Affine) {
         if self.poses.back().is_some_and(|(f, _)| *f >= frame) {
             self.poses.clear();
         }
         self.poses.push_back((frame, pose));
-        while self.poses.len() > HISTORY_FRAMES {
+        while self.poses.len() > self.config.history_frames {
             self.poses.pop_front();
         }
     }
@@ -78,12 +78,12 @@ impl MotionHistory {
 
     /// `from` (the pose at frame `frame − frames`) carried `frames` frames on at the history's
     /// velocity; `from` itself where the history is too short to tell, or more than
-    /// [`CARRY_FRAMES`] frames old at `frame`.
+    /// `carry_frames` frames old at `frame`.
     pub fn predict(&self, from: &Affine, frames: f64, frame: usize) -> Affine {
         let fresh = self
             .poses
             .back()
-            .is_some_and(|(f, _)| frame.saturating_sub(*f) <= CARRY_FRAMES);
+            .is_some_and(|(f, _)| frame.saturating_sub(*f) <= self.config.carry_frames);
         match self.velocity().filter(|_| fresh) {
             Some(v) => Affine {
                 q: std::array::from_fn(|k| from.q[k] + v[k] * frames),
@@ -96,6 +96,13 @@ impl MotionHistory {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    const CARRY_FRAMES: usize = 12;
+
+    #[test]
+    fn the_tests_carry_as_far_as_the_default() {
+        assert_eq!(MotionConfig::default().carry_frames, CARRY_FRAMES);
+    }
 
     fn moving(t: usize) -> Affine {
         let mut a = Affine::IDENTITY;

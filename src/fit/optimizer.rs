@@ -4,6 +4,7 @@
 //! the block's priors (`priors`); a step sums their normal equations, damps them, solves, and
 //! is accepted on the objective.
 
+pub use super::config::{FitParams, Mode};
 use super::context::FrameContext;
 use super::lines::target::confidence;
 use super::lines::{EnergyParams, Line, LineTerm};
@@ -11,97 +12,11 @@ use super::objective::{ImageTerm, NormalEquations, Prior};
 use super::priors::{CameraDamping, PoseDamping, ShapePrior, StrainPrior};
 use super::probability::ViewProbabilities;
 use super::state::{Block, FitState, apply_increment};
-use super::stereo::{StereoParams, StereoSet, StereoTerm};
+use super::stereo::{StereoSet, StereoTerm};
 use crate::appearance::Appearance;
 use glam::DVec3;
 use nalgebra::{DMatrix, DVector};
-use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
-
-/// Shape damping while the cameras are corrected: a zoom must not be explained as growth.
-const ZOOM_SHAPE_DAMPING: f64 = 2.0;
-
-/// The paper's settings: rigid, affine, affine + shape, affine + shape + cameras.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-pub enum Mode {
-    R,
-    L,
-    LS,
-    LSC,
-}
-
-impl Mode {
-    pub fn parse(s: &str) -> Option<Mode> {
-        match s.to_ascii_uppercase().as_str() {
-            "R" => Some(Mode::R),
-            "L" => Some(Mode::L),
-            "LS" => Some(Mode::LS),
-            "LSC" => Some(Mode::LSC),
-            _ => None,
-        }
-    }
-
-    pub fn name(self) -> &'static str {
-        match self {
-            Mode::R => "R",
-            Mode::L => "L",
-            Mode::LS => "LS",
-            Mode::LSC => "LSC",
-        }
-    }
-}
-
-#[derive(Debug, Clone)]
-pub struct FitParams {
-    pub mode: Mode,
-    /// Pyramid levels visited, coarse to fine.
-    pub levels: Vec<usize>,
-    /// T → W → π rounds per level.
-    pub rounds: usize,
-    /// Gauss–Newton steps per block and round.
-    pub steps: usize,
-    /// Levenberg–Marquardt share of the diagonal added to the normal equations.
-    pub lm: f64,
-    /// Prior weight on the shape weights (per σ²). Weak: with the pose damped, the shape
-    /// is what absorbs the organ's real deformation, and the hidden structures follow it
-    /// (hidden-tumour centroid error 1.6–1.8 mm at 2, 6.9 mm at 300, on the phantoms).
-    pub shape_prior: f64,
-    /// Relative Tikhonov damping of the camera block (camera parameters move slowly).
-    pub camera_damping: f64,
-    /// Weight (relative to the data) pulling the affine's linear part towards a rotation.
-    pub strain_prior: f64,
-    /// Tikhonov weight (relative to the data) towards the previous frame's pose.
-    pub pose_damping: f64,
-    /// Tikhonov weight (relative to the data) of the shape towards the previous frame's.
-    pub shape_damping: f64,
-    /// Gauss–Newton steps taken on one set of lines before they are rebuilt.
-    pub rebuild_every: usize,
-    /// The stereo depth term (matched once per pyramid level).
-    pub stereo: StereoParams,
-    /// Raised by whoever wants the fit to stop: checked between Gauss–Newton steps, so a
-    /// cancel is answered within one step (a few ms), not one frame.
-    pub cancel: Option<Arc<AtomicBool>>,
-}
-
-impl Default for FitParams {
-    fn default() -> Self {
-        Self {
-            mode: Mode::LS,
-            levels: vec![2, 1, 0],
-            rounds: 2,
-            steps: 3,
-            lm: 0.05,
-            shape_prior: 2.0,
-            camera_damping: 1.0,
-            strain_prior: 1.0,
-            pose_damping: 1.0,
-            shape_damping: 0.0,
-            rebuild_every: 3,
-            stereo: StereoParams::default(),
-            cancel: None,
-        }
-    }
-}
+use std::sync::atomic::Ordering;
 
 /// What fitting one frame produced.
 #[derive(Debug, Clone)]
@@ -113,15 +28,6 @@ pub struct FrameFit {
     /// outside, over all lines of the finest level, in [0, 1].
     pub confidence: f64,
     pub lines: usize,
-}
-
-fn energy_params(level: usize) -> EnergyParams {
-    EnergyParams {
-        level,
-        half_length: 10,
-        heaviside_px: 1.2,
-        probability_floor: 0.02,
-    }
 }
 
 /// One damped Gauss–Newton step on `block` over the lines and the stereo matches; returns the
@@ -178,7 +84,7 @@ pub fn step(
         .fold(0.0, f64::max)
         .max(1e-9);
     for k in 0..size {
-        eq.h[(k, k)] += params.lm * eq.h[(k, k)] + 1e-6 * max_diag;
+        eq.h[(k, k)] += params.solver.lm * eq.h[(k, k)] + params.solver.lm_floor * max_diag;
     }
     let priors = add_priors(ctx, state, prev, block, centre, params, &mut eq);
     let cholesky = eq.h.clone().cholesky()?;
@@ -216,7 +122,7 @@ pub fn step(
         None
     };
     // First the line targets (they see minima several pixels away, robustly) ...
-    if let Some(next) = try_step(&cholesky.solve(&eq.b), 3) {
+    if let Some(next) = try_step(&cholesky.solve(&eq.b), params.solver.target_tries) {
         return Some(next);
     }
     // ... and near the optimum, where targets of ambiguous lines outvote the local slope, a
@@ -232,7 +138,10 @@ pub fn step(
         None => gradient,
     };
     let prior = &eq.b - &b_data;
-    try_step(&cholesky.solve(&(prior - gradient)), 5)
+    try_step(
+        &cholesky.solve(&(prior - gradient)),
+        params.solver.newton_tries,
+    )
 }
 
 /// The priors of one step on one block, added to the normal equations in a fixed order (each
@@ -272,7 +181,7 @@ fn add_priors<'a>(
     eq: &mut NormalEquations,
 ) -> BlockPriors<'a> {
     let pose = |eq: &mut NormalEquations| {
-        let damping = PoseDamping::new(block, prev, centre, params.pose_damping, &eq.h)?;
+        let damping = PoseDamping::new(block, prev, centre, params.priors.pose_damping, &eq.h)?;
         damping.add_normal_equations(state, eq);
         Some(damping)
     };
@@ -282,23 +191,23 @@ fn add_priors<'a>(
             let Some(damping) = pose(eq) else {
                 return BlockPriors::None;
             };
-            let strain = StrainPrior::new(params.strain_prior, &eq.h);
+            let strain = StrainPrior::new(params.priors.strain, &eq.h);
             strain.add_normal_equations(state, eq);
             BlockPriors::Affine(damping, strain)
         }
         Block::Shape => {
             let shape = ShapePrior::new(
-                params.shape_prior,
+                params.priors.shape,
                 &ctx.model.shape.pca.sigma_mm,
                 prev,
-                params.shape_damping,
+                params.priors.shape_damping,
                 &eq.h,
             );
             shape.add_normal_equations(state, eq);
             BlockPriors::Shape(shape)
         }
         Block::Cameras(_) => {
-            let damping = CameraDamping::new(prev, params.camera_damping, &eq.h);
+            let damping = CameraDamping::new(prev, params.priors.camera_damping, &eq.h);
             damping.add_normal_equations(state, eq);
             BlockPriors::Cameras(damping)
         }
@@ -320,7 +229,6 @@ pub fn fit_frame(
     views: &mut [ViewProbabilities],
     appearance: &Appearance,
     params: &FitParams,
-    correct_cameras: bool,
 ) -> FrameFit {
     let mut state = start.clone();
     let mut iterations = 0u32;
@@ -332,25 +240,12 @@ pub fn fit_frame(
     if matches!(params.mode, Mode::LS | Mode::LSC) && ctx.model.shape.mode_count() > 0 {
         blocks.push(Block::Shape);
     }
-    let mut params = params.clone();
-    if params.mode == Mode::LSC && correct_cameras {
-        // Zooming in and moving closer look alike in one frame; the organ moves slowly while
-        // the zoom changes fast, so during a zoom the cameras go first and the pose is held
-        // harder: the change is explained by the intrinsics.
+    if params.correct_cameras {
+        // Zooming in and moving closer look alike in one frame: during a zoom the cameras go
+        // first (and `FitConfig::resolve` holds the pose harder), so the change is explained
+        // by the intrinsics.
         blocks.insert(0, Block::Cameras(ctx.cameras.len()));
-        params.pose_damping *= 10.0;
-        params.shape_damping = params.shape_damping.max(ZOOM_SHAPE_DAMPING);
-        // The optics can change by a few per cent a frame: give the cameras time to follow.
-        params.rounds = params.rounds.max(2);
-        // The image changes fast under a zoom: fresh lines every three steps (measured on
-        // seed 7: hidden-tumour error 2.66 mm against 3.17 mm with one set per frame).
-        params.rebuild_every = params.rebuild_every.min(3);
-        // Damping is relative to each parameter's own curvature, but fx is entangled with fy,
-        // cx, k1 and the pose: held at 0.1 the focal length ended 6 % behind the zoom on
-        // seed 5; at 0.01 it tracks within 1 %.
-        params.camera_damping *= 0.01;
     }
-    let params = &params;
     let levels: Vec<usize> = params
         .levels
         .iter()
@@ -362,7 +257,7 @@ pub fn fit_frame(
     let finest = levels.last().copied().unwrap_or(0);
     let mut matches = StereoSet::default();
     for &level in &levels {
-        let ep = energy_params(level);
+        let ep = params.energy_at(level);
         // Lines live across blocks and rounds: rebuilt every `rebuild_every` steps and when the
         // level changes (rim points re-project with the state at every evaluation, and
         // ±10 px of samples outlast a few steps of motion).
@@ -428,7 +323,7 @@ pub fn fit_frame(
         last_lines = lines;
     }
     let final_level = levels.last().copied().unwrap_or(0);
-    let ep = energy_params(final_level);
+    let ep = params.energy_at(final_level);
     // The last block's lines serve for the energy and confidence when they are at this level.
     let lines = if last_level == Some(final_level) && !last_lines.is_empty() {
         last_lines

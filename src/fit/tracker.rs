@@ -6,10 +6,11 @@
 //! corrected while the pose is held where its motion before the zoom carries it
 //! ([`super::motion`]).
 
+use super::config::{FitConfig, FitParams, Mode, Phase, TrackingConfig, Zoom};
 use super::context::FrameContext;
 use super::model::Model;
 use super::motion::MotionHistory;
-use super::optimizer::{FitParams, FrameFit, Mode, fit_frame};
+use super::optimizer::{FrameFit, fit_frame};
 use super::probability::ViewProbabilities;
 use super::state::FitState;
 use super::zoom::ZoomDetector;
@@ -23,99 +24,61 @@ use glam::DVec3;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-/// Camera correction stays on this many frames after a marked zoom change ends: the
-/// estimate lags the optics by a frame. Measured on three phantoms (seeds 1, 7, 11): one
-/// frame gave hidden-tumour errors 1.62 / 2.98 / 2.39 mm, two frames 1.62 / 3.03 / 2.40 mm
-/// (the focal length drifts along its ambiguity with depth once the optics stop).
-pub const ZOOM_SETTLE_FRAMES: usize = 1;
-/// Pose damping inside a marked zoom when the intrinsics are not corrected (R, L, LS), relative
-/// to elsewhere: the affine then stands in for the zoom. Measured LS Dice on seeds 23 / 20 / 5:
-/// 0.914 / 0.941 / 0.938 at 1, 0.933 / 0.969 / 0.946 at 0.3, 0.936 / 0.970 / 0.947 at 0.1, and
-/// no better at 0.03.
-pub const ZOOM_POSE_DAMPING_WITHOUT_CAMERAS: f64 = 0.1;
-/// Tracked frames before a detected zoom that are not trusted for the pose's motion: a zoom
-/// starts slowly, and its first frames stay under the detector's threshold.
-const ZOOM_ONSET_FRAMES: usize = 2;
-/// After this many lost frames in a row (and every as many after), try placing the model
-/// afresh.
-pub const REINIT_AFTER_LOST: usize = 3;
-/// The pyramid level tracking fits at: the coarsest whose width stays at least 400 px.
-pub fn fit_level(width: u32) -> usize {
-    let mut level = 0;
-    while level < 3 && (width >> (level + 1)) >= 400 {
-        level += 1;
-    }
-    level
-}
-
 /// Too few lines or too little confidence: the organ is not where the fit put it.
-fn is_lost(fit: &super::optimizer::FrameFit) -> bool {
-    fit.confidence < LOST_CONFIDENCE || fit.lines < 12
+fn is_lost(fit: &FrameFit, tracking: &TrackingConfig) -> bool {
+    fit.confidence < tracking.lost_confidence || fit.lines < tracking.min_lines
 }
 
-/// Below this confidence a frame counts as lost.
-pub const LOST_CONFIDENCE: f64 = 0.25;
-
+/// What to track and how: the mode, the frames, the fit's configuration, and who may cancel.
 #[derive(Debug, Clone)]
 pub struct TrackOptions {
     pub mode: Mode,
     /// Inclusive frame range.
     pub frames: (usize, usize),
-    /// Fit settings of the first frame (coarse to fine from the initial pose).
-    pub first: FitParams,
-    /// Fit settings of later frames (warm started).
-    pub next: FitParams,
+    /// Width of camera 0's frames (px): it sets the pyramid level tracking fits at.
+    pub width: u32,
+    pub config: FitConfig,
+    /// Raised by whoever wants tracking to stop: checked between frames and between
+    /// Gauss–Newton steps.
+    pub cancel: Option<Arc<AtomicBool>>,
 }
 
 impl TrackOptions {
-    /// Settings for a video `width` pixels wide: frames are fitted at the pyramid level
-    /// whose width is nearest 400–800 px (measured: at 960×540, fitting at 480×270 gave the
-    /// same Dice and hidden-tumour error as full resolution in a third of the time); the first
-    /// frame comes down to it from two levels coarser.
+    /// Default settings for a video `width` pixels wide.
     pub fn new(mode: Mode, frames: (usize, usize), width: u32) -> Self {
-        let finest = fit_level(width);
         Self {
             mode,
             frames,
-            // The initial pose is only a rough guess: hold it lightly.
-            first: FitParams {
-                mode,
-                levels: vec![finest + 2, finest + 1, finest],
-                rounds: 3,
-                // Eight steps per block: with three, depth was still 3–4 mm off after the
-                // first frame and took seven frames to settle (hidden-tumour error +0.1 mm).
-                steps: 8,
-                pose_damping: 0.1,
-                // The initial pose may be centimetres off in depth: search disparities widely.
-                stereo: super::stereo::StereoParams {
-                    search_px: 12,
-                    ..Default::default()
-                },
-                ..FitParams::default()
-            },
-            next: FitParams {
-                mode,
-                levels: vec![finest],
-                rounds: 1,
-                steps: 3,
-                // One set of lines serves both blocks of a tracked frame: the warm start moves
-                // the model by a pixel or two (measured: same Dice, LS 3.5 ms faster).
-                rebuild_every: 6,
-                // Frame after frame the shape held 4× firmer than on the first frame: with the
-                // first frame's weak prior, a mode drifted towards its ±3σ limit over a dozen
-                // frames and depth compensated (hidden tumour 3.16 mm on seed 7); with this one
-                // 2.61 / 2.73 / 2.86 mm on seeds 1, 7, 11 (LSC) and LS Dice equal or higher.
-                shape_prior: 8.0,
-                ..FitParams::default()
-            },
+            width,
+            config: FitConfig::default(),
+            cancel: None,
         }
+    }
+
+    pub fn with_config(mut self, config: FitConfig) -> Self {
+        self.config = config;
+        self
     }
 
     /// Lets `cancel` stop the fit between steps as well as between frames.
     pub fn with_cancel(mut self, cancel: Option<Arc<AtomicBool>>) -> Self {
-        self.first.cancel = cancel.clone();
-        self.next.cancel = cancel;
+        self.cancel = cancel;
         self
+    }
+
+    /// The pyramid level frames are fitted at.
+    pub fn fit_level(&self) -> usize {
+        self.config.tracking.fit_level(self.width)
+    }
+
+    /// The settings of one fit in `phase` (see [`FitConfig::resolve`]).
+    pub fn params(&self, phase: Phase, zoom: Zoom) -> FitParams {
+        FitParams {
+            cancel: self.cancel.clone(),
+            ..self
+                .config
+                .resolve(self.mode, phase, zoom, self.fit_level())
+        }
     }
 }
 
@@ -137,10 +100,6 @@ pub struct TrackedFrame {
     pub centroids: Vec<(String, DVec3)>,
 }
 
-/// Pixels this far inside a silhouette (px) are checked: nearer the edge the forest's own
-/// uncertainty would nibble at a correct contour.
-const OCCLUDER_MARGIN_PX: f32 = 3.0;
-
 /// Removes from the label image the pixels inside a fitted structure that the forest sees as
 /// background or tools: an instrument crossing the kidney hides it there. The hidden
 /// structures' masks are left whole (they ignore occlusion by definition).
@@ -149,7 +108,9 @@ fn mask_occluders(
     view: &mut ViewProbabilities,
     appearance: &Appearance,
     level: usize,
+    tracking: &TrackingConfig,
 ) {
+    let margin = tracking.occluder_margin_px;
     if view.level_count() <= level {
         return;
     }
@@ -161,14 +122,12 @@ fn mask_occluders(
         (y.min(lh - 1) * lw + x.min(lw - 1)) as u32
     };
     let candidates: Vec<usize> = (0..labels.data.len())
-        .filter(|&i| {
-            labels.data[i] != 0 && inside.data[i] >= OCCLUDER_MARGIN_PX * OCCLUDER_MARGIN_PX
-        })
+        .filter(|&i| labels.data[i] != 0 && inside.data[i] >= margin * margin)
         .collect();
     let pixels: Vec<u32> = candidates.iter().map(|&i| coarse(i)).collect();
     view.ensure(appearance, level, &pixels);
     for (&i, &c) in candidates.iter().zip(&pixels) {
-        if view.get(level, c, 0) > 0.6 {
+        if view.get(level, c, 0) > tracking.occluder_background {
             labels.data[i] = 0;
         }
     }
@@ -296,59 +255,57 @@ impl<'a> FrameTracker<'a> {
         views: &mut [ViewProbabilities],
         anchor: &FitState,
         params: &FitParams,
-        correct_cameras: bool,
     ) -> FrameFit {
-        fit_frame(
-            &self.ctx,
-            anchor,
-            anchor,
-            views,
-            self.appearance,
-            params,
-            correct_cameras,
-        )
+        fit_frame(&self.ctx, anchor, anchor, views, self.appearance, params)
+    }
+
+    fn is_lost(&self, fit: &FrameFit) -> bool {
+        is_lost(fit, &self.options.config.tracking)
     }
 
     /// Fits frame `t`: camera correction inside marked (or detected) zooms, a fresh placement
     /// after a lost stretch, and the bookkeeping of what the next frame starts from.
     fn frame(&mut self, t: usize, views: &mut [ViewProbabilities]) -> Result<Outcome, Error> {
         let options = self.options;
-        let params = if self.first {
-            &options.first
+        let zoom_config = &options.config.zoom;
+        let phase = if self.first {
+            Phase::FirstFrame
         } else {
-            &options.next
+            Phase::Tracked
         };
-        let in_zoom = (0..=ZOOM_SETTLE_FRAMES).any(|k| t >= k && self.scene.in_zoom_change(t - k));
+        let in_zoom =
+            (0..=zoom_config.settle_frames).any(|k| t >= k && self.scene.in_zoom_change(t - k));
         if in_zoom {
             self.zoom.reset();
         }
         let mut correct_cameras = options.mode == Mode::LSC && (in_zoom || self.zoom.active());
         // Without camera correction (R, L, LS) the pose is all that can follow a zoom: it
         // must move as fast as the image changes.
-        let zoom_params;
-        let params = if in_zoom && !correct_cameras {
-            zoom_params = FitParams {
-                pose_damping: params.pose_damping * ZOOM_POSE_DAMPING_WITHOUT_CAMERAS,
-                ..params.clone()
-            };
-            &zoom_params
+        let zoom = if correct_cameras {
+            Zoom::Cameras
+        } else if in_zoom {
+            Zoom::PoseOnly
         } else {
-            params
+            Zoom::Off
         };
         let anchor = if correct_cameras {
             self.carried(t)
         } else {
             self.good.clone()
         };
-        let mut fit = self.fit(views, &anchor, params, correct_cameras);
+        let mut fit = self.fit(views, &anchor, &options.params(phase, zoom));
         self.cancelled()?;
         if options.mode == Mode::LSC && !correct_cameras && self.zoom_starts(t, &fit) {
             // The frames just before held the zoom's onset, taken for motion.
-            self.motion.forget_latest(ZOOM_ONSET_FRAMES);
-            fit = self.fit(views, &self.carried(t), params, true);
+            self.motion.forget_latest(zoom_config.onset_frames);
+            fit = self.fit(
+                views,
+                &self.carried(t),
+                &options.params(phase, Zoom::Cameras),
+            );
             correct_cameras = true;
             self.cancelled()?;
-        } else if correct_cameras && !in_zoom && !is_lost(&fit) {
+        } else if correct_cameras && !in_zoom && !self.is_lost(&fit) {
             self.zoom.corrected(&self.good, &fit.state);
         }
         let (fit, lost) = self.placed_afresh_if_lost(t, views, fit);
@@ -373,7 +330,7 @@ impl<'a> FrameTracker<'a> {
     /// intrinsics fixed. Only against the frame just before: after lost frames the organ may
     /// simply be elsewhere, and a lost stretch must not turn into a change of intrinsics.
     fn zoom_starts(&mut self, t: usize, fit: &FrameFit) -> bool {
-        if self.first || self.good_frame + 1 != t || is_lost(fit) {
+        if self.first || self.good_frame + 1 != t || self.is_lost(fit) {
             return false;
         }
         let model = self.ctx.model;
@@ -381,7 +338,7 @@ impl<'a> FrameTracker<'a> {
         self.zoom.fires(&self.good, &fit.state, centre)
     }
 
-    /// After [`REINIT_AFTER_LOST`] lost frames in a row the organ may be back somewhere else:
+    /// After `reinit_after_lost` lost frames in a row the organ may be back somewhere else:
     /// it is placed afresh, keeping the shape and intrinsics learnt before the loss. Returns the
     /// frame's fit and whether it is lost.
     fn placed_afresh_if_lost(
@@ -390,16 +347,20 @@ impl<'a> FrameTracker<'a> {
         views: &mut [ViewProbabilities],
         fit: FrameFit,
     ) -> (FrameFit, bool) {
-        if !is_lost(&fit) {
+        if !self.is_lost(&fit) {
             self.lost_run = 0;
             return (fit, false);
         }
         self.lost_run += 1;
-        if !self.lost_run.is_multiple_of(REINIT_AFTER_LOST) {
+        let config = &self.options.config;
+        if !self
+            .lost_run
+            .is_multiple_of(config.tracking.reinit_after_lost.max(1))
+        {
             return (fit, true);
         }
         let Ok(affine) =
-            super::init::automatic_pose(self.scene, self.ctx.model, self.appearance, t)
+            super::init::automatic_pose(self.scene, self.ctx.model, self.appearance, config, t)
         else {
             return (fit, true);
         };
@@ -407,8 +368,12 @@ impl<'a> FrameTracker<'a> {
             affine,
             ..self.good.clone()
         };
-        let again = self.fit(views, &restart, &self.options.first, false);
-        if is_lost(&again) {
+        let again = self.fit(
+            views,
+            &restart,
+            &self.options.params(Phase::FirstFrame, Zoom::Off),
+        );
+        if self.is_lost(&again) {
             (fit, true)
         } else {
             self.lost_run = 0;
@@ -438,8 +403,8 @@ pub fn track(
         good_frame: options.frames.0,
         first: true,
         lost_run: 0,
-        motion: MotionHistory::default(),
-        zoom: ZoomDetector::default(),
+        motion: MotionHistory::new(options.config.zoom.motion),
+        zoom: ZoomDetector::new(options.config.zoom.detector),
     };
     for t in options.frames.0..=options.frames.1 {
         tracker.cancelled()?;
@@ -447,7 +412,7 @@ pub fn track(
             .map(|c| scene.frame(c, t))
             .collect::<Result<_, _>>()?;
         let started = std::time::Instant::now();
-        let levels = fit_level(scene.cameras[0].width) + 3;
+        let levels = options.fit_level() + 3;
         let mut views: Vec<ViewProbabilities> =
             super::profile::time(super::profile::Phase::Pyramid, || {
                 frames
@@ -463,7 +428,13 @@ pub fn track(
             centroids,
         } = render_state(scene, model, &state);
         for (l, view) in labels.iter_mut().zip(views.iter_mut()) {
-            mask_occluders(l, view, appearance, fit_level(scene.cameras[0].width));
+            mask_occluders(
+                l,
+                view,
+                appearance,
+                options.fit_level(),
+                &options.config.tracking,
+            );
         }
         on_frame(TrackedFrame {
             frame: t,
@@ -525,8 +496,7 @@ mod tests {
             &start,
             &mut views,
             &appearance,
-            &options.first,
-            false,
+            &options.params(Phase::FirstFrame, Zoom::Off),
         );
         let after = render_state(&scene, &model, &fit.state);
         let error = |r: &Rendered, name: &str| {

@@ -6,21 +6,13 @@
 //! percents a frame, frame after frame in one direction. Breathing and drift change it by a
 //! few tenths of a percent a frame at video rate, and fit jitter (tools crossing the rim) by
 //! up to ±1 % but back and forth (measured on phantoms without zoom). So camera correction
-//! switches on when two frames in a row grow (or shrink) by [`ZOOM_RATE_TWO_FRAMES`] together,
-//! or one frame by [`ZOOM_RATE_ONE_FRAME`], and stays on until the fitted focal length holds
-//! still for [`CALM_FRAMES`] frames.
+//! switches on when two frames in a row grow (or shrink) by `rate_two_frames` together, or one
+//! frame by `rate_one_frame`, and stays on until the fitted focal length holds still for
+//! `calm_frames` frames ([`ZoomDetectorConfig`]).
 
+use super::config::ZoomDetectorConfig;
 use super::state::FitState;
 use glam::DVec3;
-
-/// Apparent-size change over two frames changing the same way that counts as a zoom.
-pub const ZOOM_RATE_TWO_FRAMES: f64 = 0.015;
-/// Apparent-size change in a single frame that counts as a zoom.
-pub const ZOOM_RATE_ONE_FRAME: f64 = 0.025;
-/// Focal-length change per frame below which a frame counts as calm.
-pub const CALM_RATE: f64 = 0.0025;
-/// Calm frames in a row that end a detected zoom.
-pub const CALM_FRAMES: usize = 2;
 
 /// Apparent size of the organ whose preoperative centre is `centre` under `state`:
 /// cbrt|det A| · fx / z, in pixels per millimetre.
@@ -34,6 +26,7 @@ pub fn apparent_size(state: &FitState, centre: DVec3) -> Option<f64> {
 /// Whether the tracker believes the intrinsics are changing.
 #[derive(Debug, Clone, Default)]
 pub struct ZoomDetector {
+    config: ZoomDetectorConfig,
     active: bool,
     calm: usize,
     /// The previous fixed-intrinsics frame's relative change of apparent size.
@@ -41,6 +34,13 @@ pub struct ZoomDetector {
 }
 
 impl ZoomDetector {
+    pub fn new(config: ZoomDetectorConfig) -> Self {
+        Self {
+            config,
+            ..Self::default()
+        }
+    }
+
     pub fn active(&self) -> bool {
         self.active
     }
@@ -55,9 +55,9 @@ impl ZoomDetector {
         let change = b / a - 1.0;
         let sustained = self
             .last_change
-            .is_some_and(|c| c * change > 0.0 && (c + change).abs() > ZOOM_RATE_TWO_FRAMES);
+            .is_some_and(|c| c * change > 0.0 && (c + change).abs() > self.config.rate_two_frames);
         self.last_change = Some(change);
-        if sustained || change.abs() > ZOOM_RATE_ONE_FRAME {
+        if sustained || change.abs() > self.config.rate_one_frame {
             self.active = true;
             self.calm = 0;
             self.last_change = None;
@@ -66,14 +66,14 @@ impl ZoomDetector {
     }
 
     /// A frame fitted with camera correction while a detected zoom is on: the zoom ends after
-    /// [`CALM_FRAMES`] frames whose focal length barely moved.
+    /// `calm_frames` frames whose focal length barely moved.
     pub fn corrected(&mut self, before: &FitState, after: &FitState) {
         let (Some(a), Some(b)) = (before.intrinsics.first(), after.intrinsics.first()) else {
             return;
         };
-        if (b.fx / a.fx - 1.0).abs() < CALM_RATE {
+        if (b.fx / a.fx - 1.0).abs() < self.config.calm_rate {
             self.calm += 1;
-            if self.calm >= CALM_FRAMES {
+            if self.calm >= self.config.calm_frames {
                 self.active = false;
                 self.calm = 0;
             }
@@ -84,7 +84,7 @@ impl ZoomDetector {
 
     /// Forgets a zoom in progress (tracking lost, or a marked zoom change takes over).
     pub fn reset(&mut self) {
-        *self = Self::default();
+        *self = Self::new(self.config);
     }
 }
 

@@ -110,9 +110,10 @@ impl FrameContext<'_> {
                             let (x, y) = (q.x.round() as i64, q.y.round() as i64);
                             (x >= 0 && y >= 0 && x < vw && y < vh).then(|| (y * vw + x) as usize)
                         };
-                        let (Some(inside), Some(outside)) =
-                            (pick_vis(c - n * 3.0), pick_vis(c + n * 3.0))
-                        else {
+                        let (Some(inside), Some(outside)) = (
+                            pick_vis(c - n * params.rim_check_px),
+                            pick_vis(c + n * params.rim_check_px),
+                        ) else {
                             continue;
                         };
                         if raster.object.data[inside] as usize != oi
@@ -121,11 +122,17 @@ impl FrameContext<'_> {
                             continue;
                         }
                         let depth = lcam.to_camera(p).z;
-                        if (raster.depth_mm.data[inside] as f64 - depth).abs() > 0.08 * depth {
+                        if (raster.depth_mm.data[inside] as f64 - depth).abs()
+                            > params.rim_depth_tolerance * depth
+                        {
                             continue;
                         }
-                        // One line per 2×2 cell: neighbouring rim points add little but cost.
-                        let cell = ((c.x / 2.0) as i64, (c.y / 2.0) as i64, si);
+                        // One line per cell: neighbouring rim points add little but cost.
+                        let cell = (
+                            (c.x / params.line_cell_px) as i64,
+                            (c.y / params.line_cell_px) as i64,
+                            si,
+                        );
                         if !taken.insert(cell) {
                             continue;
                         }

@@ -23,8 +23,11 @@ use glam::{DVec2, DVec3};
 use rayon::prelude::*;
 
 /// Energy settings at one pyramid level.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct EnergyParams {
+    /// The pyramid level the lines live at (set per fit, not configured).
+    #[serde(skip)]
     pub level: usize,
     /// Samples on each side of the rim point (level pixels).
     pub half_length: usize,
@@ -32,6 +35,19 @@ pub struct EnergyParams {
     pub heaviside_px: f64,
     /// Probabilities are kept inside [floor, 1 − floor] before the logs.
     pub probability_floor: f32,
+    /// Variance (level px²) of a line whose best shift lies at the end of its search range:
+    /// as loose as a σ = 2 px edge, where a clean edge's parabola gives σ ≈ 0.15–0.5 px.
+    pub saturated_line_variance_px2: f64,
+    /// A rim point gets a line when the visibility raster (one level coarser) shows its
+    /// structure this far inside and something else this far outside (level pixels).
+    pub rim_check_px: f64,
+    /// ... and the raster's depth just inside agrees with the rim point's within this share.
+    pub rim_depth_tolerance: f64,
+    /// At most one line per square cell of this side (level pixels).
+    pub line_cell_px: f64,
+    /// The confidence compares p_f on samples further than this inside and outside the
+    /// fitted contour (level pixels).
+    pub confidence_band_px: f64,
 }
 
 impl Default for EnergyParams {
@@ -41,6 +57,11 @@ impl Default for EnergyParams {
             half_length: 10,
             heaviside_px: 1.2,
             probability_floor: 0.02,
+            saturated_line_variance_px2: 4.0,
+            rim_check_px: 3.0,
+            rim_depth_tolerance: 0.08,
+            line_cell_px: 2.0,
+            confidence_band_px: 1.5,
         }
     }
 }

@@ -8,10 +8,6 @@ use crate::fit::context::FrameContext;
 use crate::fit::state::FitState;
 use glam::DVec2;
 
-/// Variance (level px²) of a line whose best shift lies at the end of its search range: as
-/// loose as a σ = 2 px edge, where a clean edge's parabola gives σ ≈ 0.15–0.5 px.
-const SATURATED_LINE_VARIANCE_PX2: f64 = 4.0;
-
 /// A line's softmin target shift (level px) and its variance, from its 1D energy profile.
 pub fn line_target(line: &Line, c: DVec2, ep: &EnergyParams) -> (f64, f64) {
     let r = (ep.half_length / 2) as i64;
@@ -72,7 +68,7 @@ pub fn line_target(line: &Line, c: DVec2, ep: &EnergyParams) -> (f64, f64) {
     // pull as firmly as a clean edge does (measured: seed 5's hidden-tumour error 4.72 →
     // 3.68 mm, seed 6's LS Dice 0.907 → 0.944).
     if k == 0 || k + 1 == profile.len() {
-        return (k as f64 - r as f64, SATURATED_LINE_VARIANCE_PX2);
+        return (k as f64 - r as f64, ep.saturated_line_variance_px2);
     }
     if var < 1.0 {
         let (em, e0, ep) = (profile[k - 1], profile[k], profile[k + 1]);
@@ -100,10 +96,10 @@ pub fn confidence(lines: &[Line], state: &FitState, ctx: &FrameContext, ep: &Ene
         let (mut pin, mut nin, mut pout, mut nout) = (0.0, 0, 0.0, 0);
         for s in &line.samples {
             let dist = line.normal.dot(c - s.pos);
-            if dist > 1.5 {
+            if dist > ep.confidence_band_px {
                 pin += s.p_f as f64;
                 nin += 1;
-            } else if dist < -1.5 {
+            } else if dist < -ep.confidence_band_px {
                 pout += s.p_f as f64;
                 nout += 1;
             }
@@ -159,7 +155,10 @@ mod tests {
         let (l, c) = line(|k| if k <= 2 { 0.98 } else { 0.02 });
         let (target, var) = line_target(&l, c, &EnergyParams::default());
         assert!((target - 2.5).abs() < 0.6, "target {target}");
-        assert!(var < SATURATED_LINE_VARIANCE_PX2 / 4.0, "variance {var}");
+        assert!(
+            var < EnergyParams::default().saturated_line_variance_px2 / 4.0,
+            "variance {var}"
+        );
     }
 
     #[test]
@@ -169,11 +168,11 @@ mod tests {
         let (l, c) = line(|_| 0.02);
         let (target, var) = line_target(&l, c, &EnergyParams::default());
         assert_eq!(target, -5.0);
-        assert_eq!(var, SATURATED_LINE_VARIANCE_PX2);
+        assert_eq!(var, EnergyParams::default().saturated_line_variance_px2);
         // All organ: the other end, just as loose.
         let (l, c) = line(|_| 0.98);
         let (target, var) = line_target(&l, c, &EnergyParams::default());
         assert_eq!(target, 5.0);
-        assert_eq!(var, SATURATED_LINE_VARIANCE_PX2);
+        assert_eq!(var, EnergyParams::default().saturated_line_variance_px2);
     }
 }

@@ -29,7 +29,8 @@ pub use matching::{
 pub use term::StereoTerm;
 
 /// Settings of the stereo depth term.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct StereoParams {
     /// Weight of the term against the silhouettes' (0 switches it off). Far above 1: the
     /// silhouette lines are many and strongly correlated (neighbouring lines share pixels and
