@@ -7,6 +7,7 @@ pub mod app;
 pub mod appearance;
 pub mod classify;
 pub mod error;
+pub mod export;
 pub mod fit;
 pub mod geometry;
 pub mod info;

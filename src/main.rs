@@ -89,6 +89,11 @@ enum Command {
 }
 
 fn main() -> ExitCode {
+    // Diagnostics for whoever asks (RUST_LOG=info, =debug, or per module); quiet otherwise,
+    // so that bad input still gets exactly one line.
+    env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("error"))
+        .format_timestamp(None)
+        .init();
     // Whatever happens, one line on stderr, never a backtrace.
     std::panic::set_hook(Box::new(|info| {
         let msg = info

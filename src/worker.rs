@@ -41,8 +41,8 @@ pub enum Command {
         frames: (usize, usize),
         start: Option<Affine>,
     },
-    /// Runs an arbitrary job on the worker thread (tests, future extensions).
-    Run(Box<dyn FnOnce() -> Result<(), Error> + Send>),
+    /// Write tracked frames as `endofuse track` does (File → Export).
+    Export(crate::export::ExportJob),
     Shutdown,
 }
 
@@ -54,7 +54,7 @@ pub enum Task {
     Classify,
     Initialise,
     Track,
-    Job,
+    Export,
 }
 
 /// What the worker tells the UI.
@@ -135,33 +135,14 @@ impl Worker {
                     }
                     flag.store(id <= upto.load(Ordering::SeqCst), Ordering::SeqCst);
                     let task = task_of(&command);
-                    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                        run(command, &mut state, &flag, &outbox)
-                    }));
-                    let event = match result {
-                        Ok(Ok(())) => Event::Finished(task),
-                        Ok(Err(Error::Cancelled)) => Event::Cancelled(task),
-                        Ok(Err(e)) => Event::Failed {
-                            task,
-                            message: e.to_string(),
-                        },
-                        Err(panic) => {
-                            let what = panic
-                                .downcast_ref::<&str>()
-                                .map(|s| s.to_string())
-                                .or_else(|| panic.downcast_ref::<String>().cloned())
-                                .unwrap_or_else(|| "unknown".into());
-                            Event::Failed {
-                                task,
-                                message: format!("internal error: {what}"),
-                            }
-                        }
-                    };
+                    log::debug!("worker: {task:?} starts");
+                    let event = guarded(task, || run(command, &mut state, &flag, &outbox));
                     if outbox.send(event).is_err() {
                         break;
                     }
                 }
             })
+            .map_err(|e| log::error!("cannot start the worker thread: {e}"))
             .ok();
         Self {
             commands,
@@ -208,6 +189,34 @@ impl Drop for Worker {
     }
 }
 
+/// Runs one job and says how it ended: finished, cancelled, failed with its error, or failed
+/// with the panic's message (the worker keeps serving after a panic inside a job).
+fn guarded(task: Task, job: impl FnOnce() -> Result<(), Error>) -> Event {
+    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(job)) {
+        Ok(Ok(())) => Event::Finished(task),
+        Ok(Err(Error::Cancelled)) => Event::Cancelled(task),
+        Ok(Err(e)) => {
+            log::info!("worker: {task:?} failed: {e}");
+            Event::Failed {
+                task,
+                message: e.to_string(),
+            }
+        }
+        Err(panic) => {
+            let what = panic
+                .downcast_ref::<&str>()
+                .map(|s| s.to_string())
+                .or_else(|| panic.downcast_ref::<String>().cloned())
+                .unwrap_or_else(|| "unknown".into());
+            log::error!("worker: {task:?} panicked: {what}");
+            Event::Failed {
+                task,
+                message: format!("internal error: {what}"),
+            }
+        }
+    }
+}
+
 fn task_of(c: &Command) -> Task {
     match c {
         Command::LoadScene(_) | Command::UseScene(_) | Command::SetSeeds(_) => Task::Load,
@@ -215,8 +224,14 @@ fn task_of(c: &Command) -> Task {
         Command::Classify { .. } => Task::Classify,
         Command::Initialise { .. } => Task::Initialise,
         Command::Track { .. } => Task::Track,
-        Command::Run(_) | Command::Shutdown => Task::Job,
+        Command::Export(_) | Command::Shutdown => Task::Export,
     }
+}
+
+/// Hands an event to the UI. When the UI has gone (the window closed) nobody is waiting for
+/// the rest of the job: it stops as if cancelled.
+fn emit(out: &Sender<Event>, event: Event) -> Result<(), Error> {
+    out.send(event).map_err(|_| Error::Cancelled)
 }
 
 fn need_scene(state: &State) -> Result<Arc<Scene>, Error> {
@@ -253,7 +268,7 @@ fn run(
             state.scene = Some(scene.clone());
             state.model = Some(model.clone());
             state.appearance = None;
-            let _ = out.send(Event::SceneLoaded { scene, model });
+            emit(out, Event::SceneLoaded { scene, model })?;
         }
         Command::UseScene(scene) => {
             state.model = Some(Arc::new(Model::build(&scene)?));
@@ -268,7 +283,7 @@ fn run(
         Command::Train(params) => {
             let scene = need_scene(state)?;
             let model = Arc::new(Appearance::train(&scene, &params, Some(cancel))?);
-            let _ = out.send(Event::Trained(model.clone()));
+            emit(out, Event::Trained(model.clone()))?;
             state.appearance = Some(model);
         }
         Command::Classify { frame } => {
@@ -281,10 +296,13 @@ fn run(
                 }
                 maps.push(appearance.classify_frame(&*scene.frame(c, frame)?));
             }
-            let _ = out.send(Event::Probabilities {
-                frame,
-                maps: Arc::new(maps),
-            });
+            emit(
+                out,
+                Event::Probabilities {
+                    frame,
+                    maps: Arc::new(maps),
+                },
+            )?;
         }
         Command::Initialise { frame } => {
             let scene = need_scene(state)?;
@@ -297,7 +315,7 @@ fn run(
                 &state.config,
                 frame,
             )?;
-            let _ = out.send(Event::Initialised(affine));
+            emit(out, Event::Initialised(affine))?;
         }
         Command::Track {
             mode,
@@ -342,22 +360,32 @@ fn run(
                 Some(cancel),
                 &mut |f| {
                     done += 1;
-                    let _ = out.send(Event::Progress {
-                        task: Task::Track,
-                        done,
-                        total,
-                    });
+                    emit(
+                        out,
+                        Event::Progress {
+                            task: Task::Track,
+                            done,
+                            total,
+                        },
+                    )?;
                     let dice = crate::track::frame_dice(&scene, &f)?;
                     let frame = f.frame;
-                    let _ = out.send(Event::Frame(Box::new(f)));
+                    emit(out, Event::Frame(Box::new(f)))?;
                     if !dice.is_empty() {
-                        let _ = out.send(Event::Dice { frame, dice });
+                        emit(out, Event::Dice { frame, dice })?;
                     }
                     Ok(())
                 },
             )?;
         }
-        Command::Run(job) => job()?,
+        Command::Export(job) => {
+            let metrics = job.run()?;
+            log::info!(
+                "exported {} frames to {}",
+                metrics.frames,
+                job.dir.display()
+            );
+        }
         Command::Shutdown => {}
     }
     Ok(())
@@ -392,11 +420,15 @@ mod tests {
         assert!(
             matches!(ev.last(), Some(Event::Failed { task: Task::Train, message }) if message.contains("no scene"))
         );
-        worker.send(Command::Run(Box::new(|| panic!("boom"))));
-        let ev = until(&worker, |e| matches!(e, Event::Failed { .. }));
-        assert!(
-            matches!(ev.last(), Some(Event::Failed { message, .. }) if message.contains("boom"))
-        );
+        // A panic inside a job is a failed job, with the panic's words.
+        assert!(matches!(
+            guarded(Task::Track, || panic!("boom")),
+            Event::Failed { task: Task::Track, message } if message.contains("boom")
+        ));
+        assert!(matches!(
+            guarded(Task::Train, || Err(Error::Cancelled)),
+            Event::Cancelled(Task::Train)
+        ));
         worker.send(Command::LoadScene("/no/such/scene".into()));
         until(&worker, |e| {
             matches!(

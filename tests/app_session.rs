@@ -70,35 +70,66 @@ fn place_by_dragging_save_and_load_a_session_and_autosave() {
         .with_accessibility_check(false)
         .build_eframe(|cc| {
             let mut app = EndofuseApp::new(cc, "demo", Box::new(Scripted(session.clone())));
-            app.autosave_dir = Some(dir.join("autosave"));
+            app.files.autosave_dir = Some(dir.join("autosave"));
             app
         });
     step_until(&mut h, "the demo", |a| {
-        a.scene.is_some() && a.frames_ready()
+        a.doc.scene.is_some() && a.frames_ready()
     });
 
     // Place tool: a drag to the right moves the model along camera 0's x axis only.
     h.key_press(egui::Key::M);
     h.step();
-    assert_eq!(h.state().tool, Tool::Place);
-    let before = h.state().placement.expect("the demo has an initial pose");
-    let v = h.state().layout.views[0];
+    assert_eq!(h.state().view.tool, Tool::Place);
+    let before = h
+        .state()
+        .doc
+        .placement
+        .expect("the demo has an initial pose");
+    let v = h.state().screen.layout.views[0];
     drag(&mut h, v.center(), v.center() + vec2(40.0, 0.0));
-    let after = h.state().placement.unwrap();
+    let after = h.state().doc.placement.unwrap();
     let (t0, t1) = (before.translation_mm(), after.translation_mm());
     assert!(t1.x - t0.x > 1.0, "moved right: {t0} → {t1}");
     assert!((t1.y - t0.y).abs() < 0.2 * (t1.x - t0.x) && (t1.z - t0.z).abs() < 0.2 * (t1.x - t0.x));
 
+    // Space, both the play key and (held) the pan key of the action table: a press plays and
+    // pauses; held for a drag it pans the views and leaves playing alone.
+    h.key_press(egui::Key::Space);
+    h.step();
+    assert!(h.state().view.playing, "Space plays");
+    h.key_press(egui::Key::Space);
+    h.step();
+    assert!(!h.state().view.playing, "Space pauses");
+    let space = |pressed| Event::Key {
+        key: egui::Key::Space,
+        physical_key: None,
+        pressed,
+        repeat: false,
+        modifiers: Modifiers::NONE,
+    };
+    let zoom_before = h.state().view.transform;
+    h.event(space(true));
+    h.step();
+    let v = h.state().screen.layout.views[0];
+    drag(&mut h, v.center(), v.center() + vec2(25.0, 15.0));
+    h.event(space(false));
+    h.step();
+    assert!(!h.state().view.playing, "a Space drag does not play");
+    assert_ne!(h.state().view.transform, zoom_before, "a Space drag pans");
+    h.key_press(egui::Key::R);
+    h.step();
+
     // A stroke, then the autosave appears within a few seconds of app time.
     h.key_press(egui::Key::B);
-    let v = h.state().layout.views[1];
+    let v = h.state().screen.layout.views[1];
     drag(
         &mut h,
         v.center() - vec2(30.0, 0.0),
         v.center() + vec2(30.0, 10.0),
     );
-    assert!(h.state().unsaved());
-    let painted = h.state().editor.counts();
+    assert!(h.state().doc.unsaved());
+    let painted = h.state().doc.editor.counts();
     let autosaves = dir.join("autosave");
     step_until(&mut h, "the autosave", |_| {
         std::fs::read_dir(&autosaves)
@@ -110,16 +141,21 @@ fn place_by_dragging_save_and_load_a_session_and_autosave() {
     let ctx = h.ctx.clone();
     h.state_mut().do_action(Action::SaveSession, &ctx);
     assert!(
-        session.is_file() && !h.state().unsaved(),
+        session.is_file() && !h.state().doc.unsaved(),
         "{:?}",
-        h.state().error
+        h.state().status.error
     );
     h.state_mut().do_action(Action::Undo, &ctx);
-    h.state_mut().placement = None;
-    assert_ne!(h.state().editor.counts(), painted);
+    h.state_mut().doc.placement = None;
+    assert_ne!(h.state().doc.editor.counts(), painted);
     h.state_mut().do_action(Action::LoadSession, &ctx);
-    assert_eq!(h.state().editor.counts(), painted, "{:?}", h.state().error);
-    assert_eq!(h.state().placement, Some(after));
+    assert_eq!(
+        h.state().doc.editor.counts(),
+        painted,
+        "{:?}",
+        h.state().status.error
+    );
+    assert_eq!(h.state().doc.placement, Some(after));
 
     // Seeds as the contract's label PNGs (the demo lives in memory: into a picked folder).
     h.state_mut().do_action(Action::SaveSeeds, &ctx);
@@ -131,8 +167,8 @@ fn place_by_dragging_save_and_load_a_session_and_autosave() {
     // A damaged session file is one message in the window; nothing is lost.
     std::fs::write(&session, "{ not json").unwrap();
     h.state_mut().do_action(Action::LoadSession, &ctx);
-    let err = h.state().error.clone().unwrap_or_default();
+    let err = h.state().status.error.clone().unwrap_or_default();
     assert!(err.contains("s.endofuse.json"), "{err}");
-    assert_eq!(h.state().editor.counts(), painted);
+    assert_eq!(h.state().doc.editor.counts(), painted);
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -25,7 +25,7 @@ fn harness() -> Harness<'static, EndofuseApp> {
             let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
                 .join(format!("endofuse-app-test-{}", std::process::id()));
             let _ = std::fs::remove_dir_all(&dir);
-            app.autosave_dir = Some(dir);
+            app.files.autosave_dir = Some(dir);
             app
         })
 }
@@ -58,21 +58,24 @@ fn move_to(h: &mut Harness<'_, EndofuseApp>, pos: Pos2) {
 #[test]
 fn paint_train_track_scrub_and_review_the_demo() {
     let mut h = harness();
-    step_until(&mut h, "the demo to load", |a| a.scene.is_some());
+    step_until(&mut h, "the demo to load", |a| a.doc.scene.is_some());
     let app = h.state();
     assert_eq!(
-        app.layout.views.len(),
+        app.screen.layout.views.len(),
         2,
         "left and right views side by side"
     );
-    assert!(app.layout.views[0].max.x <= app.layout.views[1].min.x);
+    assert!(app.screen.layout.views[0].max.x <= app.screen.layout.views[1].min.x);
     shoot(&mut h, "app_demo_open");
 
     // A kidney stroke across the left view: one undo step, undone and redone by shortcut.
     h.key_press(Key::Num2);
-    assert_eq!((h.state().class, h.state().tool), (1, Tool::Brush));
-    let before = h.state().editor.counts();
-    let v = h.state().layout.views[0];
+    assert_eq!(
+        (h.state().view.class, h.state().view.tool),
+        (1, Tool::Brush)
+    );
+    let before = h.state().doc.editor.counts();
+    let v = h.state().screen.layout.views[0];
     let (a, b) = (
         pos2(v.center().x - 40.0, v.center().y + 10.0),
         pos2(v.center().x + 30.0, v.center().y - 5.0),
@@ -83,52 +86,59 @@ fn paint_train_track_scrub_and_review_the_demo() {
         move_to(&mut h, a + (b - a) * (i as f32 / 6.0));
     }
     press(&mut h, b, false);
-    let after = h.state().editor.counts();
+    let after = h.state().doc.editor.counts();
     let kidney = endofuse::scene::SEED_NONE + 1;
     assert!(
         after.get(&kidney).unwrap_or(&0) > before.get(&kidney).unwrap_or(&0),
         "the stroke painted kidney seeds"
     );
     assert_eq!(
-        h.state().editor.undo_steps(),
+        h.state().doc.editor.undo_steps(),
         1,
         "one stroke, one undo step"
     );
     h.key_press_modifiers(Modifiers::COMMAND, Key::Z);
     h.step();
     assert_eq!(
-        h.state().editor.counts(),
+        h.state().doc.editor.counts(),
         before,
         "Ctrl+Z removed the whole stroke"
     );
     h.key_press_modifiers(Modifiers::COMMAND.plus(Modifiers::SHIFT), Key::Z);
     h.step();
-    assert_eq!(h.state().editor.counts(), after, "Ctrl+Shift+Z put it back");
+    assert_eq!(
+        h.state().doc.editor.counts(),
+        after,
+        "Ctrl+Shift+Z put it back"
+    );
     move_to(&mut h, pos2(v.center().x + 80.0, v.center().y + 40.0));
     shoot(&mut h, "app_strokes_painted");
 
     // Train (T): the probability view of the kidney class appears.
     h.key_press(Key::T);
     step_until(&mut h, "training and the probability maps", |a| {
-        a.appearance.is_some() && a.busy.is_none() && matches!(a.layer, Layer::Probability(_))
+        a.doc.appearance.is_some()
+            && a.status.busy.is_none()
+            && matches!(a.view.layer, Layer::Probability(_))
     });
     step_until(&mut h, "the probability maps", |a| {
-        a.has_probabilities(a.frame)
+        a.has_probabilities(a.view.frame)
     });
-    h.state_mut().notice = None;
+    h.state_mut().status.notice = None;
     shoot(&mut h, "app_probability_view");
 
     // Track frames 0–5 in the worker; results stream in and the view follows.
     h.key_press(Key::I);
-    h.state_mut().track_range = (0, 5);
+    h.state_mut().view.track_range = (0, 5);
     let ctx = h.ctx.clone();
     h.state_mut().do_action(Action::Track, &ctx);
     step_until(&mut h, "tracking", |a| {
-        a.busy.is_none() && a.results.len() == 6
+        a.status.busy.is_none() && a.doc.results.len() == 6
     });
-    assert_eq!(h.state().frame, 5, "the view followed the tracker");
+    assert_eq!(h.state().view.frame, 5, "the view followed the tracker");
     let dice: Vec<f64> = h
         .state()
+        .doc
         .results
         .values()
         .flat_map(|r| r.dice.iter().map(|(_, d)| *d))
@@ -137,37 +147,41 @@ fn paint_train_track_scrub_and_review_the_demo() {
         !dice.is_empty() && dice.iter().all(|&d| d > 0.8),
         "Dice {dice:?}"
     );
-    h.state_mut().notice = None;
+    h.state_mut().status.notice = None;
     move_to(&mut h, pos2(5.0, SIZE[1] - 5.0));
     shoot(&mut h, "app_overlay_hidden_tumour");
 
     // Scrub: a click on the timeline moves to that frame; ← and Home step.
-    let t = h.state().layout.timeline.expect("timeline drawn");
-    let n = h.state().scene.as_ref().unwrap().frame_count as f32;
+    let t = h.state().screen.layout.timeline.expect("timeline drawn");
+    let n = h.state().doc.scene.as_ref().unwrap().frame_count as f32;
     let x = t.left() + (2.5 / n) * t.width();
     move_to(&mut h, pos2(x, t.center().y));
     press(&mut h, pos2(x, t.center().y), true);
     press(&mut h, pos2(x, t.center().y), false);
-    assert_eq!(h.state().frame, 2, "clicked frame 2 on the timeline");
+    assert_eq!(h.state().view.frame, 2, "clicked frame 2 on the timeline");
     h.key_press(Key::ArrowRight);
     h.step();
-    assert_eq!(h.state().frame, 3);
-    h.state_mut().show_review = true;
+    assert_eq!(h.state().view.frame, 3);
+    h.state_mut().view.show_review = true;
     h.run_steps(4);
     shoot(&mut h, "app_timeline_review");
 
     // A scene that does not load: one message in the window, the demo and its strokes stay.
-    let strokes = h.state().editor.counts();
+    let strokes = h.state().doc.editor.counts();
     h.state_mut().open_scene("/no/such/scene");
     step_until(&mut h, "the load error", |a| {
-        a.error.is_some() && a.busy.is_none()
+        a.status.error.is_some() && a.status.busy.is_none()
     });
     let app = h.state();
     assert!(
-        app.error.as_ref().unwrap().contains("/no/such/scene"),
+        app.status
+            .error
+            .as_ref()
+            .unwrap()
+            .contains("/no/such/scene"),
         "{:?}",
-        app.error
+        app.status.error
     );
-    assert!(app.scene.is_some());
-    assert_eq!(app.editor.counts(), strokes, "nothing painted was lost");
+    assert!(app.doc.scene.is_some());
+    assert_eq!(app.doc.editor.counts(), strokes, "nothing painted was lost");
 }

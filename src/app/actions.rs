@@ -1,6 +1,7 @@
 //! Every user action of the app, defined once: its label (menus, buttons, tooltips) and its
 //! keyboard shortcut. Menus, buttons and the key handler all read this table, so a shortcut
-//! shown is always the shortcut that works.
+//! shown is always the shortcut that works: the number keys that pick the seed class and the
+//! Space key held to pan are entries of it too.
 
 use egui::{Key, KeyboardShortcut, Modifiers};
 
@@ -34,7 +35,38 @@ pub enum Action {
     LastFrame,
     ResetView,
     Review,
+    /// Paint forest class k (0 = background/tools) with the brush: number key k + 1.
+    PickClass(u8),
+    /// Pan the views: drag while holding Space (or with the middle button).
+    Pan,
 }
+
+/// Classes the number keys can pick (1 = background/tools, 2… the visible structures).
+pub const CLASS_KEY_COUNT: u8 = 9;
+
+const CLASS_KEYS: [Key; CLASS_KEY_COUNT as usize] = [
+    Key::Num1,
+    Key::Num2,
+    Key::Num3,
+    Key::Num4,
+    Key::Num5,
+    Key::Num6,
+    Key::Num7,
+    Key::Num8,
+    Key::Num9,
+];
+
+const CLASS_LABELS: [&str; CLASS_KEY_COUNT as usize] = [
+    "Paint background / tools",
+    "Paint class 2",
+    "Paint class 3",
+    "Paint class 4",
+    "Paint class 5",
+    "Paint class 6",
+    "Paint class 7",
+    "Paint class 8",
+    "Paint class 9",
+];
 
 const fn key(k: Key) -> Option<KeyboardShortcut> {
     Some(KeyboardShortcut::new(Modifiers::NONE, k))
@@ -46,7 +78,7 @@ const fn cmd(k: Key) -> Option<KeyboardShortcut> {
 
 impl Action {
     /// In the order the key handler tries them (Redo before Undo: Ctrl+Shift+Z contains Ctrl+Z).
-    pub const ALL: [Action; 28] = [
+    pub const ALL: [Action; 38] = [
         Action::OpenScene,
         Action::OpenDemo,
         Action::SaveSession,
@@ -75,6 +107,16 @@ impl Action {
         Action::LastFrame,
         Action::ResetView,
         Action::Review,
+        Action::PickClass(0),
+        Action::PickClass(1),
+        Action::PickClass(2),
+        Action::PickClass(3),
+        Action::PickClass(4),
+        Action::PickClass(5),
+        Action::PickClass(6),
+        Action::PickClass(7),
+        Action::PickClass(8),
+        Action::Pan,
     ];
 
     pub fn label(self) -> &'static str {
@@ -107,6 +149,8 @@ impl Action {
             Action::LastFrame => "Last frame",
             Action::ResetView => "Fit views to window",
             Action::Review => "Review plots",
+            Action::PickClass(k) => CLASS_LABELS.get(k as usize).copied().unwrap_or("Paint"),
+            Action::Pan => "Pan views (hold and drag)",
         }
     }
 
@@ -139,31 +183,34 @@ impl Action {
             Action::FirstFrame => key(Key::Home),
             Action::LastFrame => key(Key::End),
             Action::ResetView => key(Key::R),
-            Action::OpenDemo | Action::SaveSeeds | Action::Initialise | Action::Review => None,
+            Action::PickClass(k) => CLASS_KEYS.get(k as usize).copied().and_then(key),
+            Action::OpenDemo
+            | Action::SaveSeeds
+            | Action::Initialise
+            | Action::Review
+            | Action::Pan => None,
+        }
+    }
+
+    /// A key that the action needs held down while the mouse works (not a press). Where it is
+    /// also another action's shortcut (Space: play / pause), that action fires when the key is
+    /// released without having been held for a drag.
+    pub fn held_key(self) -> Option<Key> {
+        match self {
+            Action::Pan => Some(Key::Space),
+            _ => None,
         }
     }
 
     /// "Label (shortcut)" for tooltips.
     pub fn hint(self, ctx: &egui::Context) -> String {
-        match self.shortcut() {
-            Some(s) => format!("{} ({})", self.label(), ctx.format_shortcut(&s)),
-            None => self.label().to_string(),
+        match (self.shortcut(), self.held_key()) {
+            (Some(s), _) => format!("{} ({})", self.label(), ctx.format_shortcut(&s)),
+            (None, Some(k)) => format!("{} (hold {})", self.label(), k.name()),
+            (None, None) => self.label().to_string(),
         }
     }
 }
-
-/// Number keys pick the seed class: 1 = background/tools, 2… the visible structures.
-pub const CLASS_KEYS: [Key; 9] = [
-    Key::Num1,
-    Key::Num2,
-    Key::Num3,
-    Key::Num4,
-    Key::Num5,
-    Key::Num6,
-    Key::Num7,
-    Key::Num8,
-    Key::Num9,
-];
 
 #[cfg(test)]
 mod tests {

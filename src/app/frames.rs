@@ -14,7 +14,7 @@ use std::sync::{Arc, Condvar, Mutex};
 pub struct Loaded {
     pub camera: usize,
     pub frame: usize,
-    pub image: Result<Arc<RgbImage>, String>,
+    pub image: Result<Arc<RgbImage>, crate::error::InputError>,
 }
 
 struct Shared {
@@ -67,7 +67,7 @@ impl FrameLoader {
                         }
                     };
                     if let Some((camera, scene, frame)) = job {
-                        let image = scene.frame(camera, frame).map_err(|e| e.to_string());
+                        let image = scene.frame(camera, frame);
                         if tx
                             .send(Loaded {
                                 camera,
@@ -81,6 +81,7 @@ impl FrameLoader {
                     }
                 }
             })
+            .map_err(|e| log::error!("cannot start the frame loader thread: {e}"))
             .ok();
         Self {
             shared,

@@ -17,7 +17,7 @@ pub fn step_until(
             assert!(
                 Instant::now() < deadline,
                 "timed out waiting for {what}; error: {:?}",
-                h.state().error
+                h.state().status.error
             );
             h.step();
             std::thread::sleep(Duration::from_millis(10));

@@ -1,0 +1,240 @@
+//! The one way the UI changes the app (rerun's `CommandSender` idea): panels, views and the
+//! key handler send [`AppCommand`]s into the [`CommandQueue`]; the app applies them once per
+//! frame, after drawing, in the order they were sent. Every menu entry, button and shortcut is
+//! an [`Action`] of the action table; the other commands carry a value a widget edited.
+
+use super::EndofuseApp;
+use super::actions::Action;
+use super::state::{Layer, Prefs, StructureStyle, Tool};
+use super::view::ViewTransform;
+use crate::geometry::Affine;
+use crate::session::FitSettings;
+use crate::strokes::Dab;
+use crossbeam_channel::{Receiver, Sender, unbounded};
+
+/// What the user asked for.
+#[derive(Debug, Clone, PartialEq)]
+pub enum AppCommand {
+    Action(Action),
+    /// A scene folder, a scene.json, or "demo" (File → Open recent, a dropped folder).
+    OpenScene(String),
+    /// A session file (a dropped file, Restore of an autosave).
+    LoadSession(std::path::PathBuf),
+    /// Show frame `t` (the user scrubbed: stop following the tracker).
+    SetFrame(usize),
+    SetPlaying(bool),
+    SetTool(Tool),
+    SetLayer(Layer),
+    SetTrackRange(usize, usize),
+    SetOverwrite(bool),
+    SetPrefs(Prefs),
+    SetSettings(FitSettings),
+    SetStyle(usize, StructureStyle),
+    SetReviewShown(bool),
+    SetTransform(ViewTransform),
+    /// Brush or eraser size times `factor`.
+    ResizeBrush(f32),
+    BeginStroke,
+    /// Dabs along a segment of `camera`'s image at `frame` (pixel-centre coordinates).
+    PaintLine {
+        camera: usize,
+        frame: usize,
+        from: (f32, f32),
+        to: (f32, f32),
+        radius_px: f32,
+        dab: Dab,
+    },
+    EndStroke,
+    /// The model moved by hand to `affine` (this frame's fit is dropped: fit again from here).
+    Place(Affine),
+    DiscardAutosave,
+    DismissError,
+    DismissNotice,
+}
+
+/// Commands sent during a frame, applied after it.
+pub struct CommandQueue {
+    tx: Sender<AppCommand>,
+    rx: Receiver<AppCommand>,
+}
+
+impl Default for CommandQueue {
+    fn default() -> Self {
+        let (tx, rx) = unbounded();
+        Self { tx, rx }
+    }
+}
+
+impl CommandQueue {
+    pub fn send(&self, command: AppCommand) {
+        // The queue owns both ends: sending cannot fail while it lives.
+        let _ = self.tx.send(command);
+    }
+
+    pub fn act(&self, action: Action) {
+        self.send(AppCommand::Action(action));
+    }
+
+    /// Everything sent since the last call, oldest first.
+    pub fn drain(&self) -> Vec<AppCommand> {
+        self.rx.try_iter().collect()
+    }
+}
+
+impl EndofuseApp {
+    /// Applies every queued command.
+    pub fn apply_commands(&mut self, ctx: &egui::Context) {
+        for c in self.commands.drain() {
+            self.apply(c, ctx);
+        }
+    }
+
+    /// Applies one command now.
+    pub fn apply(&mut self, command: AppCommand, ctx: &egui::Context) {
+        match command {
+            AppCommand::Action(a) => self.do_action(a, ctx),
+            AppCommand::OpenScene(spec) => self.open_scene(&spec),
+            AppCommand::LoadSession(path) => self.load_session_file(&path),
+            AppCommand::SetFrame(t) => {
+                self.set_frame(t);
+                self.view.playing = false;
+            }
+            AppCommand::SetPlaying(p) => self.view.playing = p,
+            AppCommand::SetTool(t) => self.view.tool = t,
+            AppCommand::SetLayer(l) => self.view.layer = l,
+            AppCommand::SetTrackRange(a, b) => self.view.track_range = (a.min(b), a.max(b)),
+            AppCommand::SetOverwrite(o) => self.view.overwrite = o,
+            AppCommand::SetPrefs(p) => self.prefs = p,
+            AppCommand::SetSettings(s) => self.doc.settings = s,
+            AppCommand::SetStyle(i, s) => {
+                if let Some(style) = self.view.styles.get_mut(i) {
+                    *style = s;
+                }
+            }
+            AppCommand::SetReviewShown(shown) => self.view.show_review = shown,
+            AppCommand::SetTransform(t) => self.view.transform = Some(t),
+            AppCommand::ResizeBrush(factor) => self.resize_brush(factor),
+            AppCommand::BeginStroke => self.doc.editor.begin_stroke(),
+            AppCommand::PaintLine {
+                camera,
+                frame,
+                from,
+                to,
+                radius_px,
+                dab,
+            } => {
+                self.doc
+                    .editor
+                    .line(camera, frame, from, to, radius_px, dab);
+            }
+            AppCommand::EndStroke => {
+                if self.doc.editor.in_stroke() {
+                    self.doc.editor.end_stroke();
+                }
+            }
+            AppCommand::Place(affine) => {
+                self.doc.placement = Some(affine);
+                self.doc.results.remove(&self.view.frame);
+                self.screen.textures.forget_overlays();
+            }
+            AppCommand::DiscardAutosave => self.discard_autosave(),
+            AppCommand::DismissError => self.status.error = None,
+            AppCommand::DismissNotice => self.status.notice = None,
+        }
+    }
+
+    /// Does what an entry of the action table does.
+    pub fn do_action(&mut self, a: Action, ctx: &egui::Context) {
+        let frames = self.doc.frame_count();
+        match a {
+            Action::OpenScene => {
+                if let Some(p) = self.files.dialogs.pick_scene() {
+                    self.open_scene(&p.display().to_string());
+                }
+            }
+            Action::OpenDemo => self.open_scene(crate::open::DEMO),
+            Action::SaveSession => {
+                if let Some(p) = self.files.dialogs.save_session() {
+                    self.save_session_to(&p);
+                }
+            }
+            Action::LoadSession => {
+                if let Some(p) = self.files.dialogs.pick_session() {
+                    self.load_session_file(&p);
+                }
+            }
+            Action::SaveSeeds => self.save_seed_pngs(),
+            Action::Export => self.export(),
+            Action::Brush => self.view.tool = Tool::Brush,
+            Action::Eraser => self.view.tool = Tool::Eraser,
+            Action::Place => self.view.tool = Tool::Place,
+            Action::BrushSmaller => self.resize_brush(0.8),
+            Action::BrushBigger => self.resize_brush(1.25),
+            Action::Undo => {
+                self.doc.editor.undo();
+            }
+            Action::Redo => {
+                self.doc.editor.redo();
+            }
+            Action::Train => self.train(),
+            Action::ShowImage => self.view.layer = Layer::Image,
+            Action::ShowProbability => {
+                let k = match self.view.layer {
+                    Layer::Probability(k) => k,
+                    _ => self.view.class,
+                };
+                self.view.layer = Layer::Probability(k);
+            }
+            Action::ShowUncertainty => self.view.layer = Layer::Uncertainty,
+            Action::Initialise => self.initialise(),
+            Action::FitFrame => self.track((self.view.frame, self.view.frame)),
+            Action::Track => self.track(self.view.track_range),
+            Action::Cancel => {
+                if self.status.busy.is_some() {
+                    self.worker.cancel();
+                }
+                self.view.playing = false;
+            }
+            Action::PlayPause => {
+                self.view.playing = !self.view.playing;
+                self.view.play_clock_s = ctx.input(|i| i.time);
+            }
+            Action::StepBack => self.set_frame(self.view.frame.saturating_sub(1)),
+            Action::StepForward => self.set_frame((self.view.frame + 1).min(frames - 1)),
+            Action::FirstFrame => self.set_frame(0),
+            Action::LastFrame => self.set_frame(frames - 1),
+            Action::ResetView => self.view.transform = None,
+            Action::Review => self.view.show_review = !self.view.show_review,
+            Action::PickClass(k) => {
+                let classes = self.doc.classes.as_ref().map_or(0, |c| c.len());
+                if (k as usize) < classes {
+                    self.view.class = k as usize;
+                    if matches!(self.view.tool, Tool::Eraser | Tool::Place) {
+                        self.view.tool = Tool::Brush;
+                    }
+                    if let Layer::Probability(_) = self.view.layer {
+                        self.view.layer = Layer::Probability(k as usize);
+                    }
+                }
+            }
+            // Panning is a drag with the key held: the views do it.
+            Action::Pan => {}
+        }
+    }
+
+    pub fn resize_brush(&mut self, factor: f32) {
+        let r = match self.view.tool {
+            Tool::Eraser => &mut self.prefs.eraser_px,
+            _ => &mut self.prefs.brush_px,
+        };
+        *r = (*r * factor).clamp(1.0, 200.0);
+    }
+
+    /// Moves to frame `t` (the user scrubbed: stop following the tracker).
+    pub fn set_frame(&mut self, t: usize) {
+        if t != self.view.frame {
+            self.view.follow_tracking = false;
+        }
+        self.view.frame = t;
+    }
+}

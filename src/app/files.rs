@@ -1,0 +1,289 @@
+//! The app's files: the dialogs that pick them (behind a trait, so tests never open one),
+//! sessions saved and loaded, the autosave written in the background and offered back when a
+//! scene opens, the seeds saved as label PNGs, and files dropped on the window. Writing and
+//! reading themselves are the core's (`session`, `export`); every failure is shown once.
+
+use super::EndofuseApp;
+use super::jobs::{PendingSession, camera_sizes};
+use crate::error::Error;
+use crate::session::{self, SESSION_FORMAT, Session};
+use crate::strokes::SeedEditor;
+use crossbeam_channel::{Receiver, Sender, unbounded};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+/// File dialogs behind a trait, so tests never open one (rfd runs on the UI thread).
+pub trait Dialogs {
+    fn pick_scene(&mut self) -> Option<PathBuf>;
+    fn pick_session(&mut self) -> Option<PathBuf>;
+    fn save_session(&mut self) -> Option<PathBuf>;
+    fn pick_folder(&mut self, title: &str) -> Option<PathBuf>;
+}
+
+/// The native dialogs.
+pub struct RfdDialogs;
+
+impl Dialogs for RfdDialogs {
+    fn pick_scene(&mut self) -> Option<PathBuf> {
+        rfd::FileDialog::new()
+            .set_title("Open a scene (scene.json)")
+            .add_filter("scene", &["json"])
+            .pick_file()
+    }
+    fn pick_session(&mut self) -> Option<PathBuf> {
+        rfd::FileDialog::new()
+            .set_title("Load a session")
+            .add_filter("endofuse session", &["json"])
+            .pick_file()
+    }
+    fn save_session(&mut self) -> Option<PathBuf> {
+        rfd::FileDialog::new()
+            .set_title("Save the session")
+            .set_file_name("session.endofuse.json")
+            .save_file()
+    }
+    fn pick_folder(&mut self, title: &str) -> Option<PathBuf> {
+        rfd::FileDialog::new().set_title(title).pick_folder()
+    }
+}
+
+/// No dialogs (tests): every request is cancelled.
+pub struct NoDialogs;
+
+impl Dialogs for NoDialogs {
+    fn pick_scene(&mut self) -> Option<PathBuf> {
+        None
+    }
+    fn pick_session(&mut self) -> Option<PathBuf> {
+        None
+    }
+    fn save_session(&mut self) -> Option<PathBuf> {
+        None
+    }
+    fn pick_folder(&mut self, _: &str) -> Option<PathBuf> {
+        None
+    }
+}
+
+/// Where the app's files go, and the autosave's bookkeeping.
+pub struct Files {
+    pub dialogs: Box<dyn Dialogs>,
+    /// Folder of autosaves (None: the app's data folder).
+    pub autosave_dir: Option<PathBuf>,
+    /// An autosave found for the scene just opened, offered to the user.
+    pub autosave_offer: Option<PathBuf>,
+    last_autosave_s: f64,
+    /// Autosaves report back from their thread: a failure is shown once, until one succeeds.
+    autosaved_tx: Sender<Result<(), Error>>,
+    autosaved_rx: Receiver<Result<(), Error>>,
+    autosave_failing: bool,
+}
+
+impl Files {
+    pub fn new(dialogs: Box<dyn Dialogs>) -> Self {
+        let (autosaved_tx, autosaved_rx) = unbounded();
+        Self {
+            dialogs,
+            autosave_dir: None,
+            autosave_offer: None,
+            last_autosave_s: 0.0,
+            autosaved_tx,
+            autosaved_rx,
+            autosave_failing: false,
+        }
+    }
+
+    /// The folder of autosaves: the one set (tests), else the app's data folder, else the
+    /// temporary folder.
+    fn autosave_folder(&self) -> PathBuf {
+        self.autosave_dir
+            .clone()
+            .or_else(|| eframe::storage_dir("endofuse"))
+            .unwrap_or_else(std::env::temp_dir)
+    }
+
+    /// The autosave file of the scene named `spec`.
+    pub fn autosave_path(&self, spec: &str) -> PathBuf {
+        session::autosave_path(&self.autosave_folder(), spec)
+    }
+}
+
+/// Removes a file that may not exist; says why when it does and cannot be removed.
+fn remove_if_present(path: &Path) -> Result<(), String> {
+    match std::fs::remove_file(path) {
+        Ok(()) => Ok(()),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
+        Err(e) => Err(format!("{}: cannot remove: {e}", path.display())),
+    }
+}
+
+impl EndofuseApp {
+    /// After a scene opens: offer its autosave, if one was left.
+    pub(super) fn offer_autosave(&mut self) {
+        let autosave = self.files.autosave_path(&self.doc.spec);
+        self.files.autosave_offer = autosave.exists().then_some(autosave);
+    }
+
+    pub(super) fn discard_autosave(&mut self) {
+        if let Some(path) = self.files.autosave_offer.take()
+            && let Err(e) = remove_if_present(&path)
+        {
+            self.status.fail(e);
+        }
+    }
+
+    /// Restores a session's seeds, settings, forest and results onto the loaded scene.
+    pub(super) fn apply_session(&mut self, s: Session, path: &Path) {
+        let Some(scene) = self.doc.scene.clone() else {
+            return;
+        };
+        let sizes = camera_sizes(&scene);
+        match session::decode_seeds(&s.seeds, &sizes, path) {
+            Ok(seeds) => {
+                self.doc.editor = SeedEditor::new(&seeds, sizes);
+                self.seeds_loaded();
+            }
+            Err(e) => {
+                self.status.fail(e);
+                return;
+            }
+        }
+        self.doc.settings = s.settings;
+        self.doc.placement = s.placement.or(self.doc.placement);
+        if let Some(f) = s.forest {
+            if Some(&f.classes) == self.doc.classes.as_ref() {
+                self.use_forest(Arc::new(f));
+            } else {
+                self.status.notice =
+                    Some("The session's forest is for other classes: train again.".into());
+            }
+        }
+        self.doc.results = s
+            .results
+            .into_iter()
+            .filter(|r| {
+                r.frame < scene.frame_count && r.state.intrinsics.len() == scene.cameras.len()
+            })
+            .map(|r| (r.frame, r))
+            .collect();
+        self.screen.textures = Default::default();
+        self.status.notice = Some(format!("Session {} restored.", path.display()));
+    }
+
+    pub(super) fn load_session_file(&mut self, path: &Path) {
+        if self.files.autosave_offer.as_deref() == Some(path) {
+            self.files.autosave_offer = None;
+        }
+        match Session::load(path) {
+            Ok(s) => {
+                if s.scene == self.doc.spec && self.doc.scene.is_some() {
+                    self.apply_session(s, path);
+                } else {
+                    let spec = s.scene.clone();
+                    self.jobs.pending_session = Some(PendingSession {
+                        session: s,
+                        path: path.to_path_buf(),
+                    });
+                    self.open_scene(&spec);
+                }
+            }
+            Err(e) => self.status.fail(e),
+        }
+    }
+
+    pub(super) fn save_session_to(&mut self, path: &Path) {
+        match self.doc.session().save(path) {
+            Ok(()) => {
+                self.doc.saved = self.doc.revision();
+                self.status.notice = Some(format!("Saved {}", path.display()));
+                // Saved under a name: the autosave is no longer needed.
+                if let Err(e) = remove_if_present(&self.files.autosave_path(&self.doc.spec)) {
+                    log::warn!("{e}");
+                }
+            }
+            Err(e) => self.status.fail(e),
+        }
+    }
+
+    /// Writes the autosave every few seconds when something changed, on a helper thread; a
+    /// failed autosave is shown once (until one succeeds again).
+    pub(super) fn autosave(&mut self, now_s: f64) {
+        for result in self.files.autosaved_rx.try_iter().collect::<Vec<_>>() {
+            match result {
+                Ok(()) => self.files.autosave_failing = false,
+                Err(e) => {
+                    if !self.files.autosave_failing {
+                        self.status.fail(format!("autosave failed: {e}"));
+                    }
+                    self.files.autosave_failing = true;
+                }
+            }
+        }
+        let state = self.doc.revision();
+        if self.doc.scene.is_none()
+            || self.doc.editor.in_stroke()
+            || state == self.doc.autosaved
+            || state == self.doc.saved
+            || now_s - self.files.last_autosave_s < 3.0
+        {
+            return;
+        }
+        self.files.last_autosave_s = now_s;
+        self.doc.autosaved = state;
+        let session = self.doc.session();
+        let path = self.files.autosave_path(&self.doc.spec);
+        let done = self.files.autosaved_tx.clone();
+        std::thread::spawn(move || {
+            // The app may be closing: then nobody needs to hear how it went.
+            let _ = done.send(session.save(&path));
+        });
+    }
+
+    /// Writes the painted seeds as the contract's label PNGs: into the scene's seeds folder
+    /// (its `seeds` template, or `seeds/{camera}/{frame:06}.png` added to scene.json), or for
+    /// the demo into a folder the user picks.
+    pub(super) fn save_seed_pngs(&mut self) {
+        let Some(scene) = self.doc.scene.clone() else {
+            return;
+        };
+        let seeds = self.doc.editor.seeds();
+        let result = match &scene.root {
+            Some(root) => crate::export::write_seeds_into_scene(&scene, root, &seeds),
+            None => match self.files.dialogs.pick_folder("Folder for the seed PNGs") {
+                Some(dir) => {
+                    crate::export::write_seeds_into_folder(&scene, &dir, &seeds).map(|n| (n, dir))
+                }
+                None => return,
+            },
+        };
+        match result {
+            Ok((n, dir)) => {
+                self.status.notice = Some(format!("Wrote {n} seed PNGs under {}", dir.display()))
+            }
+            Err(e) => self.status.fail(e),
+        }
+    }
+
+    /// A scene folder, a scene.json or a session file dropped on the window.
+    pub(super) fn dropped_files(&mut self, ctx: &egui::Context) {
+        let dropped: Vec<PathBuf> = ctx.input(|i| {
+            i.raw
+                .dropped_files
+                .iter()
+                .map(|f| f.path().to_path_buf())
+                .filter(|p| !p.as_os_str().is_empty())
+                .collect()
+        });
+        if let Some(p) = dropped.first() {
+            let is_session = p.is_file()
+                && std::fs::read_to_string(p)
+                    .ok()
+                    .is_some_and(|t| t.contains(SESSION_FORMAT));
+            if is_session {
+                self.load_session_file(p);
+            } else {
+                self.open_scene(&p.display().to_string());
+            }
+        }
+    }
+}

@@ -1,0 +1,392 @@
+//! What the app asks of the worker and what comes back: loading a scene, training, classifying
+//! a frame for the probability view, placing, tracking and exporting are typed worker commands;
+//! the worker's events are drained each frame and turned into state here. Nothing waits.
+
+use super::EndofuseApp;
+use super::state::{Layer, StructureStyle};
+use crate::appearance::{ClassMap, ForestParams, ProbabilityMaps};
+use crate::fit::Model;
+use crate::scene::Scene;
+use crate::session::{FrameResult, Session};
+use crate::strokes::SeedEditor;
+use crate::worker::{Command, Event, Task};
+use std::collections::HashMap;
+use std::path::PathBuf;
+use std::sync::Arc;
+
+/// A session waiting for its scene to load.
+pub(super) struct PendingSession {
+    pub session: Session,
+    pub path: PathBuf,
+}
+
+/// The app's side of the conversation with the worker.
+#[derive(Default)]
+pub struct Jobs {
+    /// Seeds revision the worker holds.
+    seeds_sent: u64,
+    /// The scene being loaded (it becomes the document's once it arrives).
+    loading_spec: Option<String>,
+    pub(super) pending_session: Option<PendingSession>,
+    /// Folder an export is being written to.
+    exporting: Option<PathBuf>,
+    /// Probability maps of recent frames, one per camera.
+    pub probabilities: HashMap<usize, Arc<Vec<ProbabilityMaps>>>,
+    probability_asked: Option<usize>,
+    /// Strokes changed at this time (s) and a live retrain is due.
+    retrain_due_s: Option<f64>,
+}
+
+/// (width, height) of every camera of a scene.
+pub(super) fn camera_sizes(scene: &Scene) -> Vec<(usize, usize)> {
+    scene
+        .cameras
+        .iter()
+        .map(|c| (c.width as usize, c.height as usize))
+        .collect()
+}
+
+impl EndofuseApp {
+    /// Queues a worker command; a worker that is gone is said once.
+    fn send_job(&mut self, command: Command) {
+        if !self.worker.send(command) {
+            self.status.busy = None;
+            self.status
+                .fail("the background worker has stopped: save your session and restart the app");
+        }
+    }
+
+    /// Asks the worker to load a scene; the current one stays until the new one arrives.
+    pub fn open_scene(&mut self, spec: &str) {
+        self.jobs.loading_spec = Some(spec.to_string());
+        self.status
+            .busy_with(Task::Load, format!("Loading {spec}…"), 0);
+        self.send_job(Command::LoadScene(spec.to_string()));
+    }
+
+    fn scene_loaded(&mut self, scene: Arc<Scene>, model: Arc<Model>) {
+        if let Some(spec) = self.jobs.loading_spec.take() {
+            self.doc.spec = spec;
+        }
+        let doc = &mut self.doc;
+        doc.editor = SeedEditor::new(&scene.seeds, camera_sizes(&scene));
+        self.jobs.seeds_sent = doc.editor.revision;
+        doc.saved = (doc.editor.revision, 0);
+        doc.autosaved = doc.saved;
+        doc.model = Some(model);
+        let classes = ClassMap::from_scene(&scene);
+        // Kidney (the first structure class) when there is one, else background.
+        self.view.class = 1.min(classes.len() - 1);
+        doc.classes = Some(classes);
+        self.view.styles = scene
+            .structures
+            .iter()
+            .map(|_| StructureStyle {
+                shown: true,
+                opacity: self.prefs.overlay_opacity,
+            })
+            .collect();
+        self.view.frame = 0;
+        self.view.track_range = (0, scene.frame_count.saturating_sub(1));
+        self.view.transform = None;
+        self.view.layer = Layer::Image;
+        doc.appearance = None;
+        self.jobs.probabilities.clear();
+        self.jobs.probability_asked = None;
+        doc.placement = scene.initial_pose;
+        doc.results.clear();
+        self.screen.textures = Default::default();
+        let spec = doc.spec.clone();
+        self.prefs.recent.retain(|r| r != &spec);
+        if spec != crate::open::DEMO {
+            self.prefs.recent.insert(0, spec.clone());
+            self.prefs.recent.truncate(8);
+        }
+        doc.scene = Some(scene);
+        self.offer_autosave();
+        if let Some(p) = self.jobs.pending_session.take() {
+            self.apply_session(p.session, &p.path);
+        }
+    }
+
+    /// Tells the worker about freshly loaded seeds or a forest from a session.
+    pub(super) fn seeds_loaded(&mut self) {
+        // Loaded strokes count as a change until saved again under a session name.
+        self.doc.editor.revision = self.jobs.seeds_sent + 1;
+    }
+
+    pub(super) fn use_forest(&mut self, forest: Arc<crate::appearance::Appearance>) {
+        self.send_job(Command::SetAppearance(forest.clone()));
+        self.doc.appearance = Some(forest);
+    }
+
+    /// Seeds for the worker, if they changed since it last had them.
+    fn sync_seeds(&mut self) {
+        if self.jobs.seeds_sent != self.doc.editor.revision {
+            self.send_job(Command::SetSeeds(self.doc.editor.seeds()));
+            self.jobs.seeds_sent = self.doc.editor.revision;
+        }
+    }
+
+    fn forest_params(&self) -> ForestParams {
+        ForestParams {
+            trees: self.doc.settings.trees.clamp(1, 200),
+            ..ForestParams::default()
+        }
+    }
+
+    pub fn train(&mut self) {
+        if self.doc.scene.is_none() {
+            return;
+        }
+        if self.doc.editor.counts().is_empty() {
+            self.status
+                .fail("Paint some seeds first: background/tools and each structure.");
+            return;
+        }
+        self.sync_seeds();
+        self.jobs.retrain_due_s = None;
+        self.status
+            .busy_with(Task::Train, "Training the forest…".into(), 0);
+        self.send_job(Command::Train(self.forest_params()));
+    }
+
+    fn ask_probabilities(&mut self) {
+        let frame = self.view.frame;
+        if self.doc.appearance.is_none()
+            || self.view.layer == Layer::Image
+            || self.jobs.probabilities.contains_key(&frame)
+            || self.jobs.probability_asked.is_some()
+        {
+            return;
+        }
+        self.jobs.probability_asked = Some(frame);
+        self.send_job(Command::Classify { frame });
+    }
+
+    /// True when the probability maps of frame `t` have arrived.
+    pub fn has_probabilities(&self, t: usize) -> bool {
+        self.jobs.probabilities.contains_key(&t)
+    }
+
+    fn need_forest(&mut self) -> bool {
+        if self.doc.appearance.is_none() {
+            self.status.fail("Train the forest first (T).");
+            return false;
+        }
+        true
+    }
+
+    pub(super) fn initialise(&mut self) {
+        if self.need_forest() {
+            let frame = self.view.frame;
+            self.status.busy_with(
+                Task::Initialise,
+                format!("Placing the model on frame {frame}…"),
+                0,
+            );
+            self.send_job(Command::Initialise { frame });
+        }
+    }
+
+    pub fn track(&mut self, frames: (usize, usize)) {
+        if !self.need_forest() {
+            return;
+        }
+        let Some(scene) = &self.doc.scene else {
+            return;
+        };
+        let last = scene.frame_count.saturating_sub(1);
+        let frames = (
+            frames.0.min(last),
+            frames.1.min(last).max(frames.0.min(last)),
+        );
+        // Start from what is known at the first frame: its fit, else the placement.
+        let start = self
+            .doc
+            .results
+            .get(&frames.0)
+            .filter(|r| !r.lost)
+            .map(|r| r.state.affine)
+            .or(self.doc.placement);
+        self.view.follow_tracking = true;
+        let mode = self.doc.mode();
+        self.status.busy_with(
+            Task::Track,
+            format!(
+                "Tracking frames {}–{} ({})…",
+                frames.0,
+                frames.1,
+                mode.name()
+            ),
+            frames.1 + 1 - frames.0,
+        );
+        self.send_job(Command::Track {
+            mode,
+            frames,
+            start,
+        });
+    }
+
+    /// Exports masks, overlay PNGs, trajectory.json and metrics.json of the tracked frames
+    /// through the same writer as `endofuse track` (on the worker).
+    pub(super) fn export(&mut self) {
+        let (Some(scene), Some(model)) = (self.doc.scene.clone(), self.doc.model.clone()) else {
+            return;
+        };
+        if self.doc.results.is_empty() {
+            self.status.fail("Nothing tracked yet to export.");
+            return;
+        }
+        let Some(dir) = self.files.dialogs.pick_folder("Export tracking results to") else {
+            return;
+        };
+        let forest_train_s = self
+            .doc
+            .appearance
+            .as_ref()
+            .map_or(f64::NAN, |a| a.stats.train_s);
+        self.status
+            .busy_with(Task::Export, format!("Exporting to {}…", dir.display()), 0);
+        self.jobs.exporting = Some(dir.clone());
+        self.send_job(Command::Export(crate::export::ExportJob {
+            scene,
+            model,
+            results: self.doc.results.values().cloned().collect(),
+            mode: self.doc.mode(),
+            dir,
+            forest_train_s,
+        }));
+    }
+
+    fn handle_event(&mut self, e: Event, ctx: &egui::Context) {
+        match e {
+            Event::SceneLoaded { scene, model } => {
+                self.status.error = None;
+                self.scene_loaded(scene, model);
+            }
+            Event::Trained(a) => {
+                self.status.notice = Some(format!(
+                    "Forest trained on {} pixels in {:.2} s, out-of-bag error {:.2} %",
+                    a.stats.samples,
+                    a.stats.train_s,
+                    a.stats.oob_error * 100.0
+                ));
+                self.doc.appearance = Some(a);
+                self.jobs.probabilities.clear();
+                self.jobs.probability_asked = None;
+                self.screen.textures.probability_key = None;
+                if self.view.layer == Layer::Image {
+                    self.view.layer = Layer::Probability(self.view.class);
+                }
+            }
+            Event::Probabilities { frame, maps } => {
+                self.jobs.probability_asked = None;
+                if self.jobs.probabilities.len() > 8 {
+                    self.jobs.probabilities.clear();
+                }
+                self.jobs.probabilities.insert(frame, maps);
+            }
+            Event::Initialised(a) => {
+                self.doc.placement = Some(a);
+                self.status.notice =
+                    Some("Model placed: check it, then Fit this frame (F) or Track.".into());
+            }
+            Event::Progress { task, done, total } => {
+                if let Some(b) = &mut self.status.busy
+                    && b.task == task
+                {
+                    b.done = done;
+                    b.total = total;
+                }
+            }
+            Event::Frame(f) => {
+                let r = FrameResult {
+                    frame: f.frame,
+                    state: f.state.clone(),
+                    energy: f.energy,
+                    confidence: f.confidence,
+                    lost: f.lost,
+                    ms: f.ms,
+                    dice: Vec::new(),
+                };
+                if self.view.follow_tracking {
+                    self.view.frame = f.frame;
+                }
+                self.doc.results.insert(f.frame, r);
+            }
+            Event::Dice { frame, dice } => {
+                if let Some(r) = self.doc.results.get_mut(&frame) {
+                    r.dice = dice;
+                }
+            }
+            Event::Finished(task) => self.task_ended(task, true),
+            Event::Cancelled(task) => {
+                self.task_ended(task, false);
+                self.status.notice = Some("Cancelled.".into());
+            }
+            Event::Failed { task, message } => {
+                self.task_ended(task, false);
+                self.status.fail(message);
+            }
+        }
+        ctx.request_repaint();
+    }
+
+    /// Bookkeeping when the worker ends `task`, however it ended (`finished`: it completed).
+    fn task_ended(&mut self, task: Task, finished: bool) {
+        if self.status.busy.as_ref().is_some_and(|b| b.task == task) {
+            self.status.busy = None;
+        }
+        match task {
+            Task::Classify => self.jobs.probability_asked = None,
+            Task::Load if !finished => {
+                self.jobs.pending_session = None;
+                self.jobs.loading_spec = None;
+            }
+            Task::Export => {
+                if let Some(dir) = self.jobs.exporting.take()
+                    && finished
+                {
+                    self.status.notice =
+                        Some(format!("Exported the tracked frames to {}", dir.display()));
+                }
+            }
+            _ => {}
+        }
+    }
+
+    /// Drains worker events; plays; schedules live retraining; autosaves.
+    pub(super) fn tick(&mut self, ctx: &egui::Context) {
+        for e in self.worker.drain() {
+            self.handle_event(e, ctx);
+        }
+        self.receive_frames(ctx);
+        let now = ctx.input(|i| i.time);
+        if self.view.playing
+            && let Some(scene) = &self.doc.scene
+        {
+            let dt = 1.0 / scene.fps.clamp(1.0, 120.0);
+            if now - self.view.play_clock_s >= dt {
+                self.view.play_clock_s = now;
+                self.view.frame = (self.view.frame + 1) % scene.frame_count.max(1);
+            }
+            ctx.request_repaint();
+        }
+        if self.doc.settings.live_update
+            && self.jobs.seeds_sent != self.doc.editor.revision
+            && !self.doc.editor.in_stroke()
+        {
+            let due = *self.jobs.retrain_due_s.get_or_insert(now + 0.6);
+            if now >= due && self.status.busy.is_none() {
+                self.train();
+            }
+            ctx.request_repaint_after(std::time::Duration::from_millis(200));
+        }
+        self.ask_probabilities();
+        self.autosave(now);
+        if self.status.busy.is_some() {
+            ctx.request_repaint_after(std::time::Duration::from_millis(50));
+        }
+    }
+}

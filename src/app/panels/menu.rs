@@ -1,0 +1,107 @@
+//! The menu bar (every action of the action table, grouped) and the status bar (the worker's
+//! progress with Cancel, the last error until dismissed, or the last notice).
+
+use super::{action_button, menu_item};
+use crate::app::Shown;
+use crate::app::actions::Action;
+use crate::app::commands::AppCommand;
+use egui::{Color32, RichText};
+
+pub fn menu_bar(shown: &Shown, ui: &mut egui::Ui) {
+    egui::Panel::top("menu").show(ui, |ui| {
+        egui::MenuBar::new().ui(ui, |ui| {
+            ui.menu_button("File", |ui| {
+                menu_item(shown, ui, Action::OpenScene);
+                menu_item(shown, ui, Action::OpenDemo);
+                let recent = &shown.prefs.recent;
+                ui.add_enabled_ui(!recent.is_empty(), |ui| {
+                    ui.menu_button("Open recent", |ui| {
+                        for r in recent {
+                            if ui.button(r).clicked() {
+                                shown.commands.send(AppCommand::OpenScene(r.clone()));
+                                ui.close();
+                            }
+                        }
+                    });
+                });
+                ui.separator();
+                menu_item(shown, ui, Action::LoadSession);
+                menu_item(shown, ui, Action::SaveSession);
+                menu_item(shown, ui, Action::SaveSeeds);
+                menu_item(shown, ui, Action::Export);
+            });
+            ui.menu_button("Edit", |ui| {
+                menu_item(shown, ui, Action::Undo);
+                menu_item(shown, ui, Action::Redo);
+                ui.separator();
+                menu_item(shown, ui, Action::Brush);
+                menu_item(shown, ui, Action::Eraser);
+                menu_item(shown, ui, Action::Place);
+                menu_item(shown, ui, Action::BrushSmaller);
+                menu_item(shown, ui, Action::BrushBigger);
+            });
+            ui.menu_button("View", |ui| {
+                menu_item(shown, ui, Action::ShowImage);
+                menu_item(shown, ui, Action::ShowProbability);
+                menu_item(shown, ui, Action::ShowUncertainty);
+                menu_item(shown, ui, Action::ResetView);
+                menu_item(shown, ui, Action::Review);
+            });
+            ui.menu_button("Fit", |ui| {
+                menu_item(shown, ui, Action::Train);
+                menu_item(shown, ui, Action::Initialise);
+                menu_item(shown, ui, Action::FitFrame);
+                menu_item(shown, ui, Action::Track);
+                menu_item(shown, ui, Action::Cancel);
+            });
+            ui.menu_button("Play", |ui| {
+                menu_item(shown, ui, Action::PlayPause);
+                menu_item(shown, ui, Action::StepBack);
+                menu_item(shown, ui, Action::StepForward);
+                menu_item(shown, ui, Action::FirstFrame);
+                menu_item(shown, ui, Action::LastFrame);
+            });
+            ui.with_layout(egui::Layout::right_to_left(egui::Align::Center), |ui| {
+                let spec = &shown.doc.spec;
+                let name = if spec == crate::open::DEMO {
+                    "built-in demo"
+                } else {
+                    spec.as_str()
+                };
+                let dirty = if shown.doc.unsaved() { " •" } else { "" };
+                ui.label(RichText::new(format!("{name}{dirty}")).weak());
+            });
+        });
+    });
+}
+
+pub fn status_bar(shown: &Shown, ui: &mut egui::Ui) {
+    egui::Panel::bottom("status").show(ui, |ui| {
+        ui.horizontal(|ui| {
+            if let Some(b) = &shown.status.busy {
+                ui.spinner();
+                ui.label(&b.what);
+                if b.total > 0 {
+                    ui.add(
+                        egui::ProgressBar::new(b.done as f32 / b.total as f32)
+                            .desired_width(220.0)
+                            .text(format!("{}/{}", b.done, b.total)),
+                    );
+                }
+                action_button(shown, ui, Action::Cancel, true);
+            } else {
+                ui.label(RichText::new("Ready").weak());
+            }
+            if let Some(e) = &shown.status.error {
+                ui.separator();
+                ui.colored_label(Color32::from_rgb(255, 110, 110), format!("Error: {e}"));
+                if ui.small_button("x").on_hover_text("Dismiss").clicked() {
+                    shown.commands.send(AppCommand::DismissError);
+                }
+            } else if let Some(n) = &shown.status.notice {
+                ui.separator();
+                ui.label(n);
+            }
+        });
+    });
+}

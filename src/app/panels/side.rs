@@ -1,0 +1,246 @@
+//! The side panel: seed tools and classes, the forest, the layers, the structures' display,
+//! the fit's settings and actions, and the offer to restore an autosave. Widgets edit copies;
+//! what changed goes back as a command.
+
+use super::action_button;
+use crate::app::Shown;
+use crate::app::actions::Action;
+use crate::app::commands::AppCommand;
+use crate::app::state::{Layer, Tool};
+use crate::overlay::structure_colour;
+use egui::{Color32, RichText, Sense, Vec2};
+
+pub fn side_panel(shown: &Shown, ui: &mut egui::Ui) {
+    egui::Panel::left("side")
+        .default_size(250.0)
+        .show(ui, |ui| {
+            egui::ScrollArea::vertical().show(ui, |ui| side_contents(shown, ui));
+        });
+}
+
+/// A colour swatch.
+fn swatch(ui: &mut egui::Ui, col: [u8; 3]) {
+    let (r, _) = ui.allocate_exact_size(Vec2::splat(14.0), Sense::hover());
+    ui.painter()
+        .rect_filled(r, 3.0, Color32::from_rgb(col[0], col[1], col[2]));
+}
+
+fn side_contents(shown: &Shown, ui: &mut egui::Ui) {
+    let send = |c: AppCommand| shown.commands.send(c);
+    let Some(scene) = &shown.doc.scene else {
+        ui.label("No scene loaded.");
+        if ui.button(Action::OpenDemo.label()).clicked() {
+            shown.commands.act(Action::OpenDemo);
+        }
+        return;
+    };
+    let (doc, view) = (shown.doc, shown.view);
+    let ctx = ui.ctx().clone();
+    let mut prefs = shown.prefs.clone();
+    let mut settings = doc.settings.clone();
+
+    ui.heading("Seeds");
+    ui.horizontal(|ui| {
+        for (t, a) in [
+            (Tool::Brush, Action::Brush),
+            (Tool::Eraser, Action::Eraser),
+            (Tool::Place, Action::Place),
+        ] {
+            if ui
+                .selectable_label(view.tool == t, a.label())
+                .on_hover_text(a.hint(&ctx))
+                .clicked()
+            {
+                shown.commands.act(a);
+            }
+        }
+    });
+    if let Some(classes) = &doc.classes {
+        for (k, name) in classes.names.iter().enumerate() {
+            let label = if k == 0 {
+                "background / tools"
+            } else {
+                name.as_str()
+            };
+            ui.horizontal(|ui| {
+                swatch(ui, doc.class_colour(k));
+                let text = format!("{}  {label}", k + 1);
+                let pick = Action::PickClass(k as u8);
+                if ui
+                    .selectable_label(view.class == k && view.tool == Tool::Brush, text)
+                    .on_hover_text(format!("Paint {label} ({})", pick.hint(&ctx)))
+                    .clicked()
+                {
+                    shown.commands.act(pick);
+                }
+            });
+        }
+    }
+    ui.add(
+        egui::Slider::new(&mut prefs.brush_px, 1.0..=80.0)
+            .text("brush px")
+            .logarithmic(true),
+    )
+    .on_hover_text("[ and ], or Shift+wheel");
+    ui.add(
+        egui::Slider::new(&mut prefs.eraser_px, 1.0..=120.0)
+            .text("eraser px")
+            .logarithmic(true),
+    );
+    let mut overwrite = view.overwrite;
+    if ui
+        .checkbox(&mut overwrite, "paint over other classes")
+        .changed()
+    {
+        send(AppCommand::SetOverwrite(overwrite));
+    }
+    ui.horizontal(|ui| {
+        ui.checkbox(&mut prefs.show_seeds, "seeds");
+        ui.add(egui::Slider::new(&mut prefs.seed_opacity, 0.0..=1.0).text("opacity"));
+    });
+    ui.horizontal(|ui| {
+        action_button(shown, ui, Action::Undo, doc.editor.can_undo());
+        action_button(shown, ui, Action::Redo, doc.editor.can_redo());
+    });
+    let counts = doc.editor.counts();
+    ui.label(
+        RichText::new(format!(
+            "{} painted pixels on {} frames",
+            counts.values().sum::<usize>(),
+            doc.editor.seeds().seeded_frames().len()
+        ))
+        .weak(),
+    );
+
+    ui.separator();
+    ui.heading("Forest");
+    let idle = shown.status.busy.is_none();
+    ui.horizontal(|ui| {
+        ui.add(
+            egui::DragValue::new(&mut settings.trees)
+                .range(1..=200)
+                .suffix(" trees"),
+        );
+        action_button(shown, ui, Action::Train, idle);
+    });
+    ui.checkbox(
+        &mut settings.live_update,
+        "live update (retrain after strokes)",
+    );
+    if let Some(a) = &doc.appearance {
+        ui.label(format!(
+            "trained on {} px in {:.2} s\nout-of-bag error {:.2} %",
+            a.stats.samples,
+            a.stats.train_s,
+            a.stats.oob_error * 100.0
+        ));
+    } else {
+        ui.label(RichText::new("not trained yet").weak());
+    }
+    ui.horizontal(|ui| {
+        for (a, on) in [
+            (Action::ShowImage, view.layer == Layer::Image),
+            (
+                Action::ShowProbability,
+                matches!(view.layer, Layer::Probability(_)),
+            ),
+            (Action::ShowUncertainty, view.layer == Layer::Uncertainty),
+        ] {
+            if ui
+                .selectable_label(on, a.label())
+                .on_hover_text(a.hint(&ctx))
+                .clicked()
+            {
+                shown.commands.act(a);
+            }
+        }
+    });
+    if let (Layer::Probability(k), Some(classes)) = (view.layer, &doc.classes) {
+        let mut layer = view.layer;
+        egui::ComboBox::from_label("class")
+            .selected_text(classes.names.get(k).cloned().unwrap_or_default())
+            .show_ui(ui, |ui| {
+                for (i, name) in classes.names.iter().enumerate() {
+                    ui.selectable_value(&mut layer, Layer::Probability(i), name);
+                }
+            });
+        if layer != view.layer {
+            send(AppCommand::SetLayer(layer));
+        }
+    }
+    ui.add(egui::Slider::new(&mut prefs.probability_opacity, 0.0..=1.0).text("map opacity"));
+
+    ui.separator();
+    ui.heading("Structures");
+    ui.checkbox(&mut prefs.show_overlay, "show fitted overlay");
+    for (i, (s, style)) in scene.structures.iter().zip(&view.styles).enumerate() {
+        let mut edited = *style;
+        ui.horizontal(|ui| {
+            swatch(ui, structure_colour(i));
+            let name = if s.visible {
+                s.name.clone()
+            } else {
+                format!("{} (hidden)", s.name)
+            };
+            ui.checkbox(&mut edited.shown, name);
+        });
+        ui.add(egui::Slider::new(&mut edited.opacity, 0.0..=1.0).text("fill"));
+        if edited != *style {
+            send(AppCommand::SetStyle(i, edited));
+        }
+    }
+
+    ui.separator();
+    ui.heading("Fit");
+    egui::ComboBox::from_label("mode")
+        .selected_text(settings.mode.clone())
+        .show_ui(ui, |ui| {
+            for (m, what) in [
+                ("R", "rigid pose"),
+                ("L", "affine pose"),
+                ("LS", "affine + shape"),
+                ("LSC", "affine + shape + cameras"),
+            ] {
+                ui.selectable_value(&mut settings.mode, m.to_string(), format!("{m}: {what}"));
+            }
+        });
+    ui.checkbox(
+        &mut settings.camera_correction,
+        "camera correction inside zoom changes",
+    );
+    let trained = doc.appearance.is_some();
+    ui.horizontal_wrapped(|ui| {
+        action_button(shown, ui, Action::Initialise, idle && trained);
+        action_button(shown, ui, Action::FitFrame, idle && trained);
+    });
+    ui.label(
+        RichText::new("Place model: drag to move, right- or Ctrl-drag to rotate, wheel for depth.")
+            .weak()
+            .small(),
+    );
+    ui.horizontal_wrapped(|ui| {
+        action_button(shown, ui, Action::Track, idle && trained);
+        action_button(shown, ui, Action::Review, true);
+    });
+    if let Some(path) = &shown.files.autosave_offer {
+        ui.separator();
+        ui.colored_label(
+            Color32::from_rgb(255, 200, 80),
+            "Autosaved work from an earlier run was found.",
+        );
+        ui.horizontal(|ui| {
+            if ui.button("Restore").clicked() {
+                send(AppCommand::LoadSession(path.clone()));
+            }
+            if ui.button("Discard").clicked() {
+                send(AppCommand::DiscardAutosave);
+            }
+        });
+    }
+    if prefs != *shown.prefs {
+        send(AppCommand::SetPrefs(prefs));
+    }
+    if settings != doc.settings {
+        send(AppCommand::SetSettings(settings));
+    }
+}

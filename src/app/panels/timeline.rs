@@ -1,0 +1,138 @@
+//! The timeline: one bar per frame (height = confidence, lost frames red), blue ticks on seeded
+//! frames, the tracking range and the current frame; click or drag to scrub. Below it the play
+//! buttons, the frame and range fields and the current frame's figures.
+
+use super::action_button;
+use crate::app::Shown;
+use crate::app::actions::Action;
+use crate::app::commands::AppCommand;
+use crate::app::views::Layout;
+use egui::{Color32, Sense, Stroke, pos2, vec2};
+
+pub fn timeline(shown: &Shown, layout: &mut Layout, ui: &mut egui::Ui) {
+    let Some(scene) = &shown.doc.scene else {
+        return;
+    };
+    let (doc, view) = (shown.doc, shown.view);
+    let send = |c: AppCommand| shown.commands.send(c);
+    let n = scene.frame_count.max(1);
+    egui::Panel::bottom("timeline").show(ui, |ui| {
+        ui.add_space(4.0);
+        let (rect, response) =
+            ui.allocate_exact_size(vec2(ui.available_width(), 46.0), Sense::click_and_drag());
+        layout.timeline = Some(rect);
+        let painter = ui.painter_at(rect);
+        painter.rect_filled(rect, 3.0, Color32::from_gray(28));
+        let w = rect.width() / n as f32;
+        for t in 0..n {
+            let x0 = rect.left() + t as f32 * w;
+            let cell = egui::Rect::from_min_max(
+                pos2(x0, rect.top()),
+                pos2(x0 + w.max(1.0), rect.bottom()),
+            );
+            if let Some(seeds) = (0..scene.cameras.len()).find_map(|c| doc.editor.layer(c, t))
+                && seeds.data.iter().any(|&v| v != 0)
+            {
+                painter.rect_filled(
+                    egui::Rect::from_min_max(cell.left_top(), pos2(cell.right(), cell.top() + 4.0)),
+                    0.0,
+                    Color32::from_rgb(90, 140, 255),
+                );
+            }
+            if let Some(r) = doc.results.get(&t) {
+                let h = (r.confidence.clamp(0.0, 1.0) as f32) * (rect.height() - 8.0);
+                let col = if r.lost {
+                    Color32::from_rgb(230, 60, 60)
+                } else if r.confidence < 0.5 {
+                    Color32::from_rgb(230, 180, 50)
+                } else {
+                    Color32::from_rgb(70, 200, 110)
+                };
+                let top = if r.lost {
+                    rect.top() + 6.0
+                } else {
+                    rect.bottom() - h
+                };
+                let bar = egui::Rect::from_min_max(pos2(cell.left(), top), cell.right_bottom());
+                painter.rect_filled(bar.shrink2(vec2((w * 0.1).min(1.0), 0.0)), 0.0, col);
+            }
+        }
+        let (a, b) = view.track_range;
+        let xa = rect.left() + a as f32 * w;
+        let xb = rect.left() + (b + 1) as f32 * w;
+        painter.rect_stroke(
+            egui::Rect::from_min_max(pos2(xa, rect.top()), pos2(xb, rect.bottom())),
+            0.0,
+            Stroke::new(1.0, Color32::from_gray(120)),
+            egui::StrokeKind::Inside,
+        );
+        let x = rect.left() + (view.frame as f32 + 0.5) * w;
+        painter.line_segment(
+            [pos2(x, rect.top()), pos2(x, rect.bottom())],
+            Stroke::new(2.0, Color32::WHITE),
+        );
+        if let Some(p) = response.interact_pointer_pos()
+            && (response.clicked() || response.dragged())
+        {
+            let t = (((p.x - rect.left()) / w).floor().max(0.0) as usize).min(n - 1);
+            send(AppCommand::SetFrame(t));
+        }
+        response.on_hover_text(
+            "Per-frame confidence (red: lost), blue ticks: seeded frames. Click or drag to scrub.",
+        );
+        ui.horizontal(|ui| {
+            let ctx = ui.ctx().clone();
+            for (a, icon) in [
+                (Action::FirstFrame, "|<"),
+                (Action::StepBack, "<"),
+                (
+                    Action::PlayPause,
+                    if view.playing { "Pause" } else { "Play" },
+                ),
+                (Action::StepForward, ">"),
+                (Action::LastFrame, ">|"),
+            ] {
+                if ui.button(icon).on_hover_text(a.hint(&ctx)).clicked() {
+                    shown.commands.act(a);
+                }
+            }
+            let mut f = view.frame;
+            if ui
+                .add(
+                    egui::DragValue::new(&mut f)
+                        .range(0..=n - 1)
+                        .prefix("frame "),
+                )
+                .changed()
+            {
+                send(AppCommand::SetFrame(f));
+            }
+            ui.label(format!("/ {}", n - 1));
+            ui.separator();
+            ui.label("track frames");
+            let (mut a, mut b) = view.track_range;
+            let first = ui.add(egui::DragValue::new(&mut a).range(0..=n - 1));
+            ui.label("to");
+            let last = ui.add(egui::DragValue::new(&mut b).range(0..=n - 1));
+            if first.changed() || last.changed() {
+                send(AppCommand::SetTrackRange(a, b));
+            }
+            let idle = shown.status.busy.is_none();
+            action_button(shown, ui, Action::Track, idle && doc.appearance.is_some());
+            if let Some(r) = doc.results.get(&view.frame) {
+                ui.separator();
+                ui.label(format!(
+                    "confidence {:.2}{}  ·  {:.0} ms",
+                    r.confidence,
+                    if r.lost { " (lost)" } else { "" },
+                    r.ms
+                ));
+                if !r.dice.is_empty() {
+                    let mean = r.dice.iter().map(|(_, d)| d).sum::<f64>() / r.dice.len() as f64;
+                    ui.label(format!("Dice {mean:.3}"));
+                }
+            }
+        });
+        ui.add_space(2.0);
+    });
+}

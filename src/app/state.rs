@@ -1,0 +1,251 @@
+//! The app's state in parts with one job each: [`Document`] (what the user opened and made:
+//! the scene, the strokes, the forest, the placement and the fits), [`ViewState`] (what is
+//! shown and how), [`Status`] (the worker's progress, the last error and notice) and [`Prefs`]
+//! (kept between runs). Panels and views only read them; every change goes through a command
+//! (`commands`), applied once per frame.
+
+use super::view::ViewTransform;
+use crate::appearance::{Appearance, ClassMap};
+use crate::fit::config::Mode;
+use crate::fit::{FitState, Model};
+use crate::geometry::Affine;
+use crate::scene::Scene;
+use crate::session::{FitSettings, FrameResult, SESSION_FORMAT, Session};
+use crate::strokes::SeedEditor;
+use crate::worker::Task;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+/// Preferences kept between runs (eframe persistence); every field has a default, so an old
+/// or damaged preferences file never stops the app.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct Prefs {
+    pub recent: Vec<String>,
+    /// Brush and eraser radii in image pixels.
+    pub brush_px: f32,
+    pub eraser_px: f32,
+    pub seed_opacity: f32,
+    pub probability_opacity: f32,
+    pub overlay_opacity: f32,
+    pub show_seeds: bool,
+    pub show_overlay: bool,
+}
+
+impl Default for Prefs {
+    fn default() -> Self {
+        Self {
+            recent: Vec::new(),
+            brush_px: 6.0,
+            eraser_px: 10.0,
+            seed_opacity: 0.85,
+            probability_opacity: 0.6,
+            overlay_opacity: 0.3,
+            show_seeds: true,
+            show_overlay: true,
+        }
+    }
+}
+
+impl Prefs {
+    /// The radius (image px) the left button paints or erases with.
+    pub fn radius_px(&self, tool: Tool) -> f32 {
+        match tool {
+            Tool::Eraser => self.eraser_px,
+            _ => self.brush_px,
+        }
+    }
+}
+
+/// What the left mouse button does on a view.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Tool {
+    Brush,
+    Eraser,
+    Place,
+}
+
+/// What is drawn under the seeds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Layer {
+    Image,
+    /// Probability of one forest class.
+    Probability(usize),
+    Uncertainty,
+}
+
+/// Per-structure display settings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StructureStyle {
+    pub shown: bool,
+    pub opacity: f32,
+}
+
+/// What the worker is busy with, for the status bar.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Busy {
+    pub task: Task,
+    pub what: String,
+    pub done: usize,
+    pub total: usize,
+}
+
+/// What the user opened and made.
+#[derive(Default)]
+pub struct Document {
+    pub scene: Option<Arc<Scene>>,
+    /// The model of the scene's structures (its joint shape model built once, by the worker).
+    pub model: Option<Arc<Model>>,
+    pub classes: Option<ClassMap>,
+    /// The scene as the user named it: a folder, a scene.json, or "demo".
+    pub spec: String,
+    pub editor: SeedEditor,
+    pub settings: FitSettings,
+    pub appearance: Option<Arc<Appearance>>,
+    /// The pose the model was placed at (the scene's, automatic, or by hand).
+    pub placement: Option<Affine>,
+    pub results: BTreeMap<usize, FrameResult>,
+    /// (seed revision, results count) at the last save, and at the last autosave.
+    pub saved: (u64, usize),
+    pub autosaved: (u64, usize),
+}
+
+impl Document {
+    /// True when strokes or results changed since the last save.
+    pub fn unsaved(&self) -> bool {
+        self.scene.is_some() && self.revision() != self.saved
+    }
+
+    /// What the save markers compare: the strokes' revision and the number of fitted frames.
+    pub fn revision(&self) -> (u64, usize) {
+        (self.editor.revision, self.results.len())
+    }
+
+    pub fn session(&self) -> Session {
+        Session {
+            format: SESSION_FORMAT.into(),
+            scene: self.spec.clone(),
+            seeds: crate::session::encode_seeds(&self.editor.seeds()),
+            settings: self.settings.clone(),
+            placement: self.placement,
+            forest: self.appearance.as_deref().cloned(),
+            results: self.results.values().cloned().collect(),
+        }
+    }
+
+    /// The mode tracking runs in: the settings' mode, LS when LSC's camera correction is off.
+    pub fn mode(&self) -> Mode {
+        match Mode::parse(&self.settings.mode).unwrap_or(Mode::LS) {
+            Mode::LSC if !self.settings.camera_correction => Mode::LS,
+            m => m,
+        }
+    }
+
+    /// The state drawn at frame `t`: its fit, else the placement (mean shape, calibration).
+    pub fn state_at(&self, t: usize) -> Option<FitState> {
+        if let Some(r) = self.results.get(&t) {
+            return Some(r.state.clone());
+        }
+        let (scene, model) = (self.scene.as_ref()?, self.model.as_ref()?);
+        let affine = self.placement?;
+        Some(crate::fit::tracker::initial_state(scene, model, affine))
+    }
+
+    /// Seed value painted for forest class `k`.
+    pub fn seed_value(&self, k: usize) -> u8 {
+        if k == 0 {
+            return crate::scene::SEED_BACKGROUND;
+        }
+        self.classes
+            .as_ref()
+            .and_then(|c| c.labels.get(k).copied())
+            .unwrap_or(crate::scene::SEED_BACKGROUND)
+    }
+
+    /// Colour of forest class `k` (0 = background/tools) for seeds and probability maps.
+    pub fn class_colour(&self, k: usize) -> [u8; 3] {
+        if k == 0 {
+            return crate::overlay::BACKGROUND_SEED_COLOUR;
+        }
+        let (Some(classes), Some(scene)) = (&self.classes, &self.scene) else {
+            return [255, 255, 255];
+        };
+        let label = classes.labels.get(k).copied().unwrap_or(0);
+        let i = scene
+            .structures
+            .iter()
+            .position(|s| s.label == label)
+            .unwrap_or(k);
+        crate::overlay::structure_colour(i)
+    }
+
+    /// Frames in the scene (1 without one).
+    pub fn frame_count(&self) -> usize {
+        self.scene.as_ref().map_or(1, |s| s.frame_count.max(1))
+    }
+}
+
+/// What is shown and how.
+pub struct ViewState {
+    pub frame: usize,
+    pub playing: bool,
+    pub play_clock_s: f64,
+    /// The view follows frames as the tracker delivers them (until the user scrubs).
+    pub follow_tracking: bool,
+    pub track_range: (usize, usize),
+    pub tool: Tool,
+    /// Forest class painted (0 = background/tools).
+    pub class: usize,
+    /// Strokes paint over other classes.
+    pub overwrite: bool,
+    pub transform: Option<ViewTransform>,
+    pub layer: Layer,
+    pub styles: Vec<StructureStyle>,
+    pub show_review: bool,
+}
+
+impl Default for ViewState {
+    fn default() -> Self {
+        Self {
+            frame: 0,
+            playing: false,
+            play_clock_s: 0.0,
+            follow_tracking: true,
+            track_range: (0, 0),
+            tool: Tool::Brush,
+            class: 1,
+            overwrite: false,
+            transform: None,
+            layer: Layer::Image,
+            styles: Vec::new(),
+            show_review: false,
+        }
+    }
+}
+
+/// The status line: the worker's job, the last error (shown until dismissed) and notice.
+#[derive(Debug, Clone, Default)]
+pub struct Status {
+    pub busy: Option<Busy>,
+    pub error: Option<String>,
+    pub notice: Option<String>,
+}
+
+impl Status {
+    /// Shows `error` to the user (and logs it): the one place an error reaches the window.
+    pub fn fail(&mut self, error: impl std::fmt::Display) {
+        let message = error.to_string();
+        log::warn!("{message}");
+        self.error = Some(message);
+    }
+
+    pub fn busy_with(&mut self, task: Task, what: String, total: usize) {
+        self.busy = Some(Busy {
+            task,
+            what,
+            done: 0,
+            total,
+        });
+    }
+}

@@ -1,0 +1,210 @@
+//! Textures of what the views show — the frames (decoded on the loader thread), the seeds,
+//! the probability or uncertainty maps, and the CPU overlay — re-uploaded only when what they
+//! show changes.
+
+use super::Screen;
+use crate::app::state::Layer;
+use crate::app::{EndofuseApp, Shown};
+use crate::scene::SEED_NONE;
+use egui::{ColorImage, TextureHandle, TextureOptions};
+
+/// The textures and what each shows.
+#[derive(Default)]
+pub struct Textures {
+    frames: Vec<Option<((usize, usize), TextureHandle)>>,
+    /// Frame asked of the loader per camera, not yet arrived.
+    requested: Vec<Option<usize>>,
+    seeds: Vec<Option<((usize, u64), TextureHandle)>>,
+    probability: Vec<Option<TextureHandle>>,
+    pub probability_key: Option<(usize, Layer)>,
+    pub(super) overlay_cpu: Vec<Option<(usize, TextureHandle)>>,
+}
+
+impl Textures {
+    /// The fitted overlays changed (the model was moved by hand).
+    pub fn forget_overlays(&mut self) {
+        self.overlay_cpu.clear();
+    }
+}
+
+pub(super) fn slot<T>(v: &mut Vec<Option<T>>, i: usize) -> &mut Option<T> {
+    if v.len() <= i {
+        v.resize_with(i + 1, || None);
+    }
+    &mut v[i]
+}
+
+/// An RGBA (unmultiplied) texture of `size` pixels.
+pub(super) fn rgba_texture(
+    ctx: &egui::Context,
+    name: String,
+    size: [usize; 2],
+    rgba: &[u8],
+    options: TextureOptions,
+) -> TextureHandle {
+    ctx.load_texture(
+        name,
+        ColorImage::from_rgba_unmultiplied(size, rgba),
+        options,
+    )
+}
+
+/// The current frame's texture of camera `c`; while a new frame decodes on the loader
+/// thread, the last one shown stays up.
+pub(super) fn frame_texture(shown: &Shown, screen: &mut Screen, c: usize) -> Option<TextureHandle> {
+    let scene = shown.doc.scene.clone()?;
+    let frame = shown.view.frame;
+    let current = slot(&mut screen.textures.frames, c).clone();
+    if current.as_ref().is_none_or(|(k, _)| *k != (c, frame))
+        && *slot(&mut screen.textures.requested, c) != Some(frame)
+    {
+        screen.loader.request(&scene, c, frame);
+        *slot(&mut screen.textures.requested, c) = Some(frame);
+    }
+    current.map(|(_, t)| t)
+}
+
+pub(super) fn seeds_texture(
+    shown: &Shown,
+    screen: &mut Screen,
+    ctx: &egui::Context,
+    c: usize,
+) -> Option<TextureHandle> {
+    let (doc, frame) = (shown.doc, shown.view.frame);
+    let key = (frame, doc.editor.revision);
+    if let Some((k, tex)) = slot(&mut screen.textures.seeds, c)
+        && *k == key
+    {
+        return Some(tex.clone());
+    }
+    let layer = doc.editor.layer(c, frame)?;
+    let classes = doc.classes.as_ref()?;
+    let colours: Vec<(u8, [u8; 3])> = (0..classes.len())
+        .map(|k| (doc.seed_value(k), doc.class_colour(k)))
+        .collect();
+    let mut rgba = vec![0u8; layer.data.len() * 4];
+    for (px, &v) in rgba.chunks_exact_mut(4).zip(&layer.data) {
+        if v == SEED_NONE {
+            continue;
+        }
+        if let Some((_, c)) = colours.iter().find(|(s, _)| *s == v) {
+            px.copy_from_slice(&[c[0], c[1], c[2], 255]);
+        }
+    }
+    let tex = rgba_texture(
+        ctx,
+        format!("seeds-{c}"),
+        [layer.width, layer.height],
+        &rgba,
+        TextureOptions::NEAREST,
+    );
+    *slot(&mut screen.textures.seeds, c) = Some((key, tex.clone()));
+    Some(tex)
+}
+
+/// Probability of the chosen class (in its colour) or uncertainty (dark → bright orange).
+pub(super) fn probability_texture(
+    shown: &Shown,
+    screen: &mut Screen,
+    ctx: &egui::Context,
+    c: usize,
+) -> Option<TextureHandle> {
+    let (layer, frame) = (shown.view.layer, shown.view.frame);
+    if layer == Layer::Image {
+        return None;
+    }
+    let maps = shown.jobs.probabilities.get(&frame)?;
+    let key = (frame, layer);
+    let textures = &mut screen.textures;
+    if textures.probability_key != Some(key) {
+        textures.probability.clear();
+        textures.probability_key = Some(key);
+    }
+    if let Some(tex) = slot(&mut textures.probability, c) {
+        return Some(tex.clone());
+    }
+    let m = maps.get(c)?;
+    let rgba: Vec<u8> = match layer {
+        Layer::Probability(k) => {
+            let col = shown.doc.class_colour(k);
+            m.class_plane(k.min(m.classes - 1))
+                .data
+                .iter()
+                .flat_map(|&p| [col[0], col[1], col[2], (p.clamp(0.0, 1.0) * 255.0) as u8])
+                .collect()
+        }
+        _ => m
+            .uncertainty()
+            .data
+            .iter()
+            .flat_map(|&u| {
+                let u = u.clamp(0.0, 1.0);
+                [
+                    255,
+                    (80.0 + 175.0 * u) as u8,
+                    (40.0 * (1.0 - u)) as u8,
+                    (u * 255.0) as u8,
+                ]
+            })
+            .collect(),
+    };
+    let tex = rgba_texture(
+        ctx,
+        format!("prob-{c}"),
+        [m.width, m.height],
+        &rgba,
+        TextureOptions::LINEAR,
+    );
+    *slot(&mut textures.probability, c) = Some(tex.clone());
+    Some(tex)
+}
+
+impl EndofuseApp {
+    /// Uploads frames the loader finished (those still wanted); a frame that cannot be read
+    /// stops playing and says why.
+    pub(crate) fn receive_frames(&mut self, ctx: &egui::Context) {
+        for l in self.screen.loader.drain() {
+            let textures = &mut self.screen.textures;
+            if *slot(&mut textures.requested, l.camera) == Some(l.frame) {
+                *slot(&mut textures.requested, l.camera) = None;
+            }
+            if l.frame != self.view.frame {
+                continue;
+            }
+            match l.image {
+                Ok(img) => {
+                    let image = ColorImage::from_rgb(
+                        [img.width() as usize, img.height() as usize],
+                        img.as_raw(),
+                    );
+                    let tex = ctx.load_texture(
+                        format!("frame-{}", l.camera),
+                        image,
+                        TextureOptions::LINEAR,
+                    );
+                    *slot(&mut textures.frames, l.camera) = Some(((l.camera, l.frame), tex));
+                    ctx.request_repaint();
+                }
+                Err(e) => {
+                    self.status.fail(e);
+                    self.view.playing = false;
+                }
+            }
+        }
+    }
+
+    /// True when every view shows the current frame (frames decode on a loader thread).
+    pub fn frames_ready(&self) -> bool {
+        let Some(scene) = &self.doc.scene else {
+            return false;
+        };
+        (0..scene.cameras.len()).all(|c| {
+            self.screen
+                .textures
+                .frames
+                .get(c)
+                .and_then(|f| f.as_ref())
+                .is_some_and(|(k, _)| *k == (c, self.view.frame))
+        })
+    }
+}

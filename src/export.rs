@@ -1,0 +1,131 @@
+//! Writing what a user made in the app, as the command line would: the painted seeds as the
+//! scene's label PNGs (CONTRACT §2), and tracked frames re-rendered and written through the
+//! same recorder as `endofuse track` (CONTRACT §3), with overlay PNGs.
+
+use crate::error::Error;
+use crate::fit::Model;
+use crate::fit::config::Mode;
+use crate::fit::tracker::TrackedFrame;
+use crate::scene::Scene;
+use crate::scene::template::PathTemplate;
+use crate::session::FrameResult;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+/// Where seed PNGs go in a scene folder whose scene.json names none.
+pub const DEFAULT_SEEDS_TEMPLATE: &str = "seeds/{camera}/{frame:06}.png";
+
+/// Where seed PNGs go in a folder of their own (a scene that lives in memory, like the demo).
+pub const FOLDER_SEEDS_TEMPLATE: &str = "{camera}/{frame:06}.png";
+
+fn template(source: &str) -> PathTemplate {
+    PathTemplate::parse(source).expect("the built-in seed templates are valid")
+}
+
+/// Writes every painted view and frame as a label PNG at `dir`/`template`; returns how many.
+pub fn write_seed_pngs(
+    scene: &Scene,
+    dir: &Path,
+    template: &PathTemplate,
+    seeds: &crate::scene::Seeds,
+) -> Result<usize, Error> {
+    let mut n = 0;
+    for (c, frames) in seeds.by_camera.iter().enumerate() {
+        for (&t, img) in frames {
+            let path = dir.join(template.expand(t, &scene.cameras[c].name, ""));
+            crate::scene::write::write_labels(&path, img)?;
+            n += 1;
+        }
+    }
+    Ok(n)
+}
+
+/// Writes seed PNGs into a picked folder, one subfolder per camera; returns how many.
+pub fn write_seeds_into_folder(
+    scene: &Scene,
+    dir: &Path,
+    seeds: &crate::scene::Seeds,
+) -> Result<usize, Error> {
+    write_seed_pngs(scene, dir, &template(FOLDER_SEEDS_TEMPLATE), seeds)
+}
+
+/// Writes seed PNGs into a scene folder; adds a `seeds` entry to its scene.json when it has
+/// none. Returns how many files were written and where.
+pub fn write_seeds_into_scene(
+    scene: &Scene,
+    root: &Path,
+    seeds: &crate::scene::Seeds,
+) -> Result<(usize, PathBuf), Error> {
+    let template = scene
+        .seeds_template
+        .clone()
+        .unwrap_or_else(|| template(DEFAULT_SEEDS_TEMPLATE));
+    let n = write_seed_pngs(scene, root, &template, seeds)?;
+    if scene.seeds_template.is_none() {
+        let json = root.join("scene.json");
+        let text = std::fs::read_to_string(&json).map_err(|source| Error::Write {
+            path: json.clone(),
+            source,
+        })?;
+        let mut v: serde_json::Value = serde_json::from_str(&text)
+            .map_err(|e| crate::error::input_err(json.display().to_string(), e.to_string()))?;
+        if let Some(o) = v.as_object_mut() {
+            o.insert("seeds".into(), template.source().into());
+        }
+        crate::scene::write::write_json_atomic(&json, &v)?;
+    }
+    Ok((n, root.to_path_buf()))
+}
+
+/// Re-renders tracked states and writes them as `endofuse track` does, plus overlay PNGs.
+pub fn export_results(
+    scene: &Scene,
+    model: &Model,
+    results: &[FrameResult],
+    mode: Mode,
+    dir: &Path,
+    forest_train_s: f64,
+) -> Result<crate::track::TrackMetrics, Error> {
+    let mut recorder = crate::track::Recorder::new(scene, dir, mode);
+    recorder.overlays = true;
+    for r in results {
+        let rendered = crate::fit::tracker::render_state(scene, model, &r.state);
+        recorder.record(&TrackedFrame {
+            frame: r.frame,
+            state: r.state.clone(),
+            energy: r.energy,
+            iterations: 0,
+            ms: r.ms,
+            confidence: r.confidence,
+            lost: r.lost,
+            labels: rendered.labels,
+            hidden: rendered.hidden,
+            centroids: rendered.centroids,
+        })?;
+    }
+    recorder.finish(forest_train_s)
+}
+
+/// An export the app hands the worker: everything it needs, owned.
+#[derive(Debug, Clone)]
+pub struct ExportJob {
+    pub scene: Arc<Scene>,
+    pub model: Arc<Model>,
+    pub results: Vec<FrameResult>,
+    pub mode: Mode,
+    pub dir: PathBuf,
+    pub forest_train_s: f64,
+}
+
+impl ExportJob {
+    pub fn run(&self) -> Result<crate::track::TrackMetrics, Error> {
+        export_results(
+            &self.scene,
+            &self.model,
+            &self.results,
+            self.mode,
+            &self.dir,
+            self.forest_train_s,
+        )
+    }
+}
