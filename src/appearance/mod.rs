@@ -166,7 +166,7 @@ impl Appearance {
         let classes = ClassMap::from_scene(scene);
         let samples = collect_samples(scene, &classes, cancel)?;
         let (forest, mut stats) = Forest::train(&samples, classes.len(), params)
-            .map_err(|p| InputError::new(seeds_origin(scene), p))?;
+            .map_err(|e| InputError::new(seeds_origin(scene), e.to_string()))?;
         // Report what the user waits for: reading seeded frames, features and the forest.
         stats.train_s = started.elapsed().as_secs_f64();
         Ok(Appearance {

@@ -5,6 +5,32 @@
 use glam::DVec3;
 use std::collections::HashMap;
 
+/// Why a mesh is unusable. Indices are 0-based as in [`Mesh`]; the messages count vertices and
+/// faces from 1, as OBJ files and modelling tools do.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum MeshError {
+    #[error("mesh has no vertices")]
+    NoVertices,
+    #[error("mesh has no faces")]
+    NoFaces,
+    #[error("vertex {} has a non-finite coordinate ({position_mm:?})", .vertex + 1)]
+    NonFiniteVertex { vertex: usize, position_mm: DVec3 },
+    #[error(
+        "face {} refers to vertex {} but the mesh has {vertex_count} vertices",
+        .face + 1,
+        *.vertex as u64 + 1
+    )]
+    VertexOutOfRange {
+        face: usize,
+        vertex: u32,
+        vertex_count: u32,
+    },
+    #[error("face {} is degenerate (repeats a vertex: {:?})", .face + 1, .corners.map(|i| i + 1))]
+    RepeatedVertex { face: usize, corners: [u32; 3] },
+    #[error("face {} is degenerate (zero area)", .face + 1)]
+    ZeroArea { face: usize },
+}
+
 /// An indexed triangle mesh. Vertex order matters: shape catalogs and PCA modes rely on it.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct Mesh {
@@ -17,22 +43,21 @@ impl Mesh {
         Self { vertices, faces }
     }
 
-    /// Checks what every later stage relies on; the message says which element is wrong.
+    /// Checks what every later stage relies on; the error says which element is wrong.
     /// Degenerate faces (repeated index, or zero area) are refused: they have no normal and
     /// usually mean a broken export.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), MeshError> {
         if self.vertices.is_empty() {
-            return Err("mesh has no vertices".into());
+            return Err(MeshError::NoVertices);
         }
         if self.faces.is_empty() {
-            return Err("mesh has no faces".into());
+            return Err(MeshError::NoFaces);
         }
         if let Some(i) = self.vertices.iter().position(|v| !v.is_finite()) {
-            return Err(format!(
-                "vertex {} has a non-finite coordinate ({:?})",
-                i + 1,
-                self.vertices[i]
-            ));
+            return Err(MeshError::NonFiniteVertex {
+                vertex: i,
+                position_mm: self.vertices[i],
+            });
         }
         let n = self.vertices.len() as u32;
         let extent = self
@@ -41,23 +66,21 @@ impl Mesh {
             .unwrap_or(0.0);
         for (fi, f) in self.faces.iter().enumerate() {
             if let Some(&bad) = f.iter().find(|&&i| i >= n) {
-                return Err(format!(
-                    "face {} refers to vertex {} but the mesh has {} vertices",
-                    fi + 1,
-                    bad as u64 + 1,
-                    n
-                ));
+                return Err(MeshError::VertexOutOfRange {
+                    face: fi,
+                    vertex: bad,
+                    vertex_count: n,
+                });
             }
             if f[0] == f[1] || f[1] == f[2] || f[0] == f[2] {
-                return Err(format!(
-                    "face {} is degenerate (repeats a vertex: {:?})",
-                    fi + 1,
-                    f.map(|i| i + 1)
-                ));
+                return Err(MeshError::RepeatedVertex {
+                    face: fi,
+                    corners: *f,
+                });
             }
             let area2 = self.face_cross(fi).length();
             if area2 <= 1e-12 * extent * extent {
-                return Err(format!("face {} is degenerate (zero area)", fi + 1));
+                return Err(MeshError::ZeroArea { face: fi });
             }
         }
         Ok(())
@@ -213,21 +236,22 @@ mod tests {
         assert!(tetra().validate().is_ok());
         let mut m = tetra();
         m.vertices[2].y = f64::NAN;
-        assert!(m.validate().unwrap_err().contains("vertex 3"));
+        assert!(m.validate().unwrap_err().to_string().contains("vertex 3"));
         let mut m = tetra();
         m.faces[1] = [0, 1, 9];
         assert!(
             m.validate()
                 .unwrap_err()
+                .to_string()
                 .contains("face 2 refers to vertex 10")
         );
         let mut m = tetra();
         m.faces[0] = [0, 0, 1];
-        assert!(m.validate().unwrap_err().contains("degenerate"));
+        assert!(m.validate().unwrap_err().to_string().contains("degenerate"));
         let mut m = tetra();
         m.vertices.push(DVec3::new(2.0, 0.0, 0.0));
         m.faces.push([0, 1, 4]);
-        assert!(m.validate().unwrap_err().contains("zero area"));
+        assert!(m.validate().unwrap_err().to_string().contains("zero area"));
     }
 
     #[test]

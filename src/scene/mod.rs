@@ -11,22 +11,24 @@ pub mod frames;
 pub mod labels;
 pub mod template;
 pub mod trajectory;
+mod validate;
 pub mod write;
 
 use crate::error::InputError;
 use crate::geometry::mesh_io::load_mesh;
-use crate::geometry::pose::is_rotation;
-use crate::geometry::{Affine, Camera, Extrinsics, Intrinsics, Mesh};
+use crate::geometry::{Affine, Camera, Mesh};
 use crate::plane::LabelImage;
 use format::{FORMAT_V1, SceneFile};
 use frames::{FrameCache, FrameSource};
-use glam::{DMat3, DVec3};
+use glam::DVec3;
 use image::RgbImage;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use template::PathTemplate;
-pub use trajectory::{Trajectory, TrajectoryFrame};
+pub use trajectory::{Trajectory, TrajectoryError, TrajectoryFrame};
+pub use validate::{AffineError, validate_affine};
+use validate::{check_name, load_catalog, validate_camera};
 
 /// Seed value meaning background or tools (CONTRACT §2); 0 means unpainted.
 pub const SEED_BACKGROUND: u8 = 255;
@@ -166,7 +168,7 @@ impl Scene {
         let mut cameras = Vec::new();
         let mut frame_sources = Vec::new();
         for (i, c) in file.cameras.iter().enumerate() {
-            let (camera, template) = validate_camera(c, i).map_err(&bad)?;
+            let (camera, template) = validate_camera(c, i).map_err(|e| bad(e.to_string()))?;
             if cameras.iter().any(|k: &Camera| k.name == camera.name) {
                 return Err(bad(format!("two cameras are named '{}'", camera.name)));
             }
@@ -494,7 +496,7 @@ impl Scene {
                 let traj: Trajectory = serde_json::from_str(&text)
                     .map_err(|e| InputError::new(&path, format!("malformed trajectory: {e}")))?;
                 traj.validate(self.frame_count, self.cameras.len())
-                    .map_err(|e| InputError::new(&path, e))?;
+                    .map_err(|e| InputError::new(&path, e.to_string()))?;
                 Some(traj)
             }
             None => None,
@@ -522,137 +524,4 @@ impl Scene {
     pub fn in_zoom_change(&self, t: usize) -> bool {
         self.zoom_changes.iter().any(|&(a, b)| (a..=b).contains(&t))
     }
-}
-
-fn check_name(name: &str) -> Result<(), String> {
-    if name.is_empty()
-        || name.len() > 64
-        || !name
-            .chars()
-            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
-        || name == "background"
-    {
-        return Err(format!(
-            "name '{name}' must be 1–64 letters, digits, '_' or '-' (and not 'background'): it names output folders"
-        ));
-    }
-    Ok(())
-}
-
-fn validate_camera(c: &format::CameraEntry, i: usize) -> Result<(Camera, PathTemplate), String> {
-    let what = format!("cameras[{i}] ('{}')", c.name);
-    check_name(&c.name).map_err(|p| format!("{what}: {p}"))?;
-    if c.width <= 0 || c.height <= 0 || c.width > 16384 || c.height > 16384 {
-        return Err(format!(
-            "{what}: image size {}×{} must be positive (and at most 16384)",
-            c.width, c.height
-        ));
-    }
-    let nums = [c.fx, c.fy, c.cx, c.cy, c.k1, c.k2, c.p1, c.p2];
-    if nums.iter().any(|v| !v.is_finite()) {
-        return Err(format!("{what}: intrinsics must be finite numbers"));
-    }
-    if c.fx <= 0.0 || c.fy <= 0.0 {
-        return Err(format!(
-            "{what}: focal lengths must be positive, got fx={} fy={}",
-            c.fx, c.fy
-        ));
-    }
-    let r = DMat3::from_cols(
-        DVec3::new(c.rotation[0][0], c.rotation[1][0], c.rotation[2][0]),
-        DVec3::new(c.rotation[0][1], c.rotation[1][1], c.rotation[2][1]),
-        DVec3::new(c.rotation[0][2], c.rotation[1][2], c.rotation[2][2]),
-    );
-    if !is_rotation(r, 1e-3) {
-        return Err(format!(
-            "{what}: 'rotation' is not a rotation matrix (rows must be orthonormal with determinant +1)"
-        ));
-    }
-    let t = DVec3::from_array(c.translation);
-    if !t.is_finite() {
-        return Err(format!("{what}: 'translation' must be finite"));
-    }
-    let template = PathTemplate::parse(&c.frames).map_err(|e| format!("{what}: frames: {e}"))?;
-    if !template.uses_frame() {
-        return Err(format!(
-            "{what}: frames template '{}' has no {{frame}} placeholder",
-            c.frames
-        ));
-    }
-    Ok((
-        Camera {
-            name: c.name.clone(),
-            width: c.width as u32,
-            height: c.height as u32,
-            intrinsics: Intrinsics {
-                fx: c.fx,
-                fy: c.fy,
-                cx: c.cx,
-                cy: c.cy,
-                k1: c.k1,
-                k2: c.k2,
-                p1: c.p1,
-                p2: c.p2,
-            },
-            extrinsics: Extrinsics {
-                rotation: r,
-                translation_mm: t,
-            },
-        },
-        template,
-    ))
-}
-
-pub fn validate_affine(q: &[f64]) -> Result<Affine, String> {
-    if q.len() != 12 {
-        return Err(format!(
-            "'affine' needs 12 numbers (q1…q12 of eq. 2), got {}",
-            q.len()
-        ));
-    }
-    let mut a = Affine::IDENTITY;
-    a.q.copy_from_slice(q);
-    if !a.is_finite() {
-        return Err("'affine' has a non-finite number".into());
-    }
-    let det = a.linear().determinant();
-    if det <= 1e-9 {
-        return Err(format!(
-            "'affine' linear part has determinant {det:.3e}: it must preserve orientation and not collapse the model"
-        ));
-    }
-    Ok(a)
-}
-
-fn load_catalog(dir: &Path, mesh: &Mesh) -> Result<Vec<Vec<DVec3>>, InputError> {
-    let entries = std::fs::read_dir(dir)
-        .map_err(|e| InputError::new(dir, format!("cannot read catalog folder: {e}")))?;
-    let mut files: Vec<PathBuf> = entries
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| {
-            p.extension()
-                .and_then(|e| e.to_str())
-                .is_some_and(|e| matches!(e.to_ascii_lowercase().as_str(), "obj" | "stl" | "ply"))
-        })
-        .collect();
-    files.sort();
-    if files.is_empty() {
-        return Err(InputError::new(
-            dir,
-            "catalog folder holds no meshes (.obj, .stl, .ply)",
-        ));
-    }
-    files
-        .iter()
-        .map(|f| {
-            let m = load_mesh(f)?;
-            if m.vertices.len() != mesh.vertices.len() {
-                return Err(InputError::new(
-                    f,
-                    format!("catalog mesh has {} vertices but the structure's mesh has {} (catalogs need the same vertices in the same order)", m.vertices.len(), mesh.vertices.len()),
-                ));
-            }
-            Ok(m.vertices)
-        })
-        .collect()
 }

@@ -9,6 +9,24 @@ enum Piece {
     Structure,
 }
 
+/// Why a path template cannot be used; each variant carries the template as written.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum TemplateError {
+    #[error("template '{template}' has an unclosed '{{'")]
+    Unclosed { template: String },
+    /// `spec` is what follows `frame:`, which must be a zero and a width, like `06`.
+    #[error("template '{template}': frame format '{spec}' should look like 06")]
+    FrameFormat { template: String, spec: String },
+    /// `placeholder` is the text between the braces.
+    #[error(
+        "template '{template}' has an unknown placeholder '{{{placeholder}}}' (known: frame, camera, structure)"
+    )]
+    UnknownPlaceholder {
+        template: String,
+        placeholder: String,
+    },
+}
+
 /// A parsed path template.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct PathTemplate {
@@ -17,7 +35,7 @@ pub struct PathTemplate {
 }
 
 impl PathTemplate {
-    pub fn parse(source: &str) -> Result<Self, String> {
+    pub fn parse(source: &str) -> Result<Self, TemplateError> {
         let mut pieces = Vec::new();
         let mut rest = source;
         while let Some(open) = rest.find('{') {
@@ -26,7 +44,9 @@ impl PathTemplate {
             }
             let close = rest[open..]
                 .find('}')
-                .ok_or_else(|| format!("template '{source}' has an unclosed '{{'"))?
+                .ok_or_else(|| TemplateError::Unclosed {
+                    template: source.to_string(),
+                })?
                 + open;
             let inner = &rest[open + 1..close];
             let (name, spec) = inner.split_once(':').unwrap_or((inner, ""));
@@ -35,15 +55,25 @@ impl PathTemplate {
                     let width = if spec.is_empty() {
                         0
                     } else {
-                        spec.trim_start_matches('0').parse::<usize>().ok().filter(|w| *w <= 12 && spec.starts_with('0')).ok_or_else(|| {
-                            format!("template '{source}': frame format '{spec}' should look like 06")
-                        })?
+                        spec.trim_start_matches('0')
+                            .parse::<usize>()
+                            .ok()
+                            .filter(|w| *w <= 12 && spec.starts_with('0'))
+                            .ok_or_else(|| TemplateError::FrameFormat {
+                                template: source.to_string(),
+                                spec: spec.to_string(),
+                            })?
                     };
                     Piece::Frame { width }
                 }
                 "camera" if spec.is_empty() => Piece::Camera,
                 "structure" if spec.is_empty() => Piece::Structure,
-                _ => return Err(format!("template '{source}' has an unknown placeholder '{{{inner}}}' (known: frame, camera, structure)")),
+                _ => {
+                    return Err(TemplateError::UnknownPlaceholder {
+                        template: source.to_string(),
+                        placeholder: inner.to_string(),
+                    });
+                }
             });
             rest = &rest[close + 1..];
         }
@@ -91,13 +121,22 @@ mod tests {
             t.expand(7, "right", "tumour_endo"),
             "gt/hidden/tumour_endo/right/f7.png"
         );
-        assert!(PathTemplate::parse("x/{frame:6}.png").is_err());
-        assert!(
+        assert_eq!(
+            PathTemplate::parse("x/{frame:6}.png")
+                .unwrap_err()
+                .to_string(),
+            "template 'x/{frame:6}.png': frame format '6' should look like 06"
+        );
+        assert_eq!(
             PathTemplate::parse("x/{frames}.png")
                 .unwrap_err()
-                .contains("unknown placeholder")
+                .to_string(),
+            "template 'x/{frames}.png' has an unknown placeholder '{frames}' (known: frame, camera, structure)"
         );
-        assert!(PathTemplate::parse("x/{frame.png").is_err());
+        assert_eq!(
+            PathTemplate::parse("x/{frame.png").unwrap_err().to_string(),
+            "template 'x/{frame.png' has an unclosed '{'"
+        );
         assert!(!PathTemplate::parse("still.png").unwrap().uses_frame());
     }
 }

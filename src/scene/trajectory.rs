@@ -6,6 +6,31 @@ use crate::geometry::Intrinsics;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
+/// A trajectory entry later stages cannot use. `entry` is the position in `frames` (0-based,
+/// as the messages show it), `frame` the frame number the entry gives.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum TrajectoryError {
+    #[error("frames[{entry}] (frame {frame}): 'affine' must be 12 finite numbers")]
+    Affine { entry: usize, frame: u32 },
+    #[error("frames[{entry}]: frame {frame} is beyond the scene's {frame_count} frames")]
+    FrameBeyondScene {
+        entry: usize,
+        frame: u32,
+        frame_count: usize,
+    },
+    #[error(
+        "frames[{entry}] (frame {frame}): {listed} cameras listed, the scene has {camera_count}"
+    )]
+    CameraCount {
+        entry: usize,
+        frame: u32,
+        listed: usize,
+        camera_count: usize,
+    },
+    #[error("frames[{entry}] (frame {frame}): non-finite centroid")]
+    NonFiniteCentroid { entry: usize, frame: u32 },
+}
+
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq, Default)]
 pub struct Trajectory {
     pub frames: Vec<TrajectoryFrame>,
@@ -36,34 +61,30 @@ pub struct TrajectoryFrame {
 }
 
 impl Trajectory {
-    /// Checks what later stages rely on; the message names the frame entry.
-    pub fn validate(&self, frame_count: usize, camera_count: usize) -> Result<(), String> {
-        for (i, f) in self.frames.iter().enumerate() {
+    /// Checks what later stages rely on; the error names the frame entry.
+    pub fn validate(&self, frame_count: usize, camera_count: usize) -> Result<(), TrajectoryError> {
+        for (entry, f) in self.frames.iter().enumerate() {
+            let frame = f.frame;
             if f.affine.len() != 12 || f.affine.iter().any(|v| !v.is_finite()) {
-                return Err(format!(
-                    "frames[{i}] (frame {}): 'affine' must be 12 finite numbers",
-                    f.frame
-                ));
+                return Err(TrajectoryError::Affine { entry, frame });
             }
-            if f.frame as usize >= frame_count {
-                return Err(format!(
-                    "frames[{i}]: frame {} is beyond the scene's {} frames",
-                    f.frame, frame_count
-                ));
+            if frame as usize >= frame_count {
+                return Err(TrajectoryError::FrameBeyondScene {
+                    entry,
+                    frame,
+                    frame_count,
+                });
             }
             if !f.cameras.is_empty() && f.cameras.len() != camera_count {
-                return Err(format!(
-                    "frames[{i}] (frame {}): {} cameras listed, the scene has {}",
-                    f.frame,
-                    f.cameras.len(),
-                    camera_count
-                ));
+                return Err(TrajectoryError::CameraCount {
+                    entry,
+                    frame,
+                    listed: f.cameras.len(),
+                    camera_count,
+                });
             }
             if f.centroids.values().flatten().any(|v| !v.is_finite()) {
-                return Err(format!(
-                    "frames[{i}] (frame {}): non-finite centroid",
-                    f.frame
-                ));
+                return Err(TrajectoryError::NonFiniteCentroid { entry, frame });
             }
         }
         Ok(())

@@ -61,32 +61,39 @@ impl Default for SynthOptions {
     }
 }
 
+/// Options that cannot make a scene. The messages name the `synth` flags, since that is where
+/// the values come from.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SynthOptionsError {
+    #[error("--frames must be between 1 and 100000, got {frames}")]
+    Frames { frames: usize },
+    #[error("--width/--height must be between 16 and 8192, got {width_px}×{height_px}")]
+    Size { width_px: u32, height_px: u32 },
+    #[error("--views must be between 1 and 16, got {views}")]
+    Views { views: usize },
+    #[error("--noise must be between 0 and 1 (intensities are in [0, 1]), got {noise}")]
+    Noise { noise: f64 },
+}
+
 impl SynthOptions {
     /// Refuses options that cannot make a scene.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), SynthOptionsError> {
         if self.frames == 0 || self.frames > 100_000 {
-            return Err(format!(
-                "--frames must be between 1 and 100000, got {}",
-                self.frames
-            ));
+            return Err(SynthOptionsError::Frames {
+                frames: self.frames,
+            });
         }
         if !(16..=8192).contains(&self.width) || !(16..=8192).contains(&self.height) {
-            return Err(format!(
-                "--width/--height must be between 16 and 8192, got {}×{}",
-                self.width, self.height
-            ));
+            return Err(SynthOptionsError::Size {
+                width_px: self.width,
+                height_px: self.height,
+            });
         }
         if self.views == 0 || self.views > 16 {
-            return Err(format!(
-                "--views must be between 1 and 16, got {}",
-                self.views
-            ));
+            return Err(SynthOptionsError::Views { views: self.views });
         }
         if !(self.noise.is_finite() && (0.0..=1.0).contains(&self.noise)) {
-            return Err(format!(
-                "--noise must be between 0 and 1 (intensities are in [0, 1]), got {}",
-                self.noise
-            ));
+            return Err(SynthOptionsError::Noise { noise: self.noise });
         }
         Ok(())
     }
@@ -123,7 +130,9 @@ pub fn write_scene(
     options: &SynthOptions,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<(), Error> {
-    options.validate().map_err(|p| InputError::new(dir, p))?;
+    options
+        .validate()
+        .map_err(|e| InputError::new(dir, e.to_string()))?;
     let phantom = Phantom::new(options.clone());
     let cams0 = phantom.initial_cameras();
     let wrap = |path: PathBuf| {
@@ -242,7 +251,9 @@ pub fn demo_options() -> SynthOptions {
 
 /// Builds a phantom scene in memory (the built-in demo, and tests).
 pub fn memory_scene(options: &SynthOptions) -> Result<Scene, InputError> {
-    options.validate().map_err(|p| InputError::new("demo", p))?;
+    options
+        .validate()
+        .map_err(|e| InputError::new("demo", e.to_string()))?;
     let phantom = Phantom::new(options.clone());
     let truths: Vec<FrameTruth> = (0..options.frames)
         .into_par_iter()

@@ -4,8 +4,11 @@
 //! (strokes are unbalanced), bootstrap with out-of-bag error, and inference that walks the trees
 //! tree-major over blocks of pixels so each tree stays in cache.
 
+mod train;
+
+pub use train::{TrainError, TrainStats};
+
 use super::features::{FEATURE_COUNT, FeatureVector};
-use crate::rng::Rng;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -119,15 +122,37 @@ struct ForestData {
     params: ForestParams,
 }
 
-impl TryFrom<ForestData> for Forest {
-    type Error = String;
+/// Why a serialised forest is refused.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum ForestDataError {
+    #[error("forest has no trees or fewer than two classes")]
+    Empty,
+    #[error("tree {index}: {source}")]
+    Tree { index: usize, source: TreeError },
+}
 
-    fn try_from(d: ForestData) -> Result<Self, String> {
+/// A tree that breaks an invariant the walk relies on (see `Tree::check`); `node` indexes
+/// the tree's flat node array.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum TreeError {
+    #[error("tree has no nodes or a leaf table of the wrong size")]
+    Shape,
+    #[error("node {node} splits on a feature or child that does not exist")]
+    Split { node: usize },
+    #[error("leaf {node} is malformed")]
+    Leaf { node: usize },
+}
+
+impl TryFrom<ForestData> for Forest {
+    type Error = ForestDataError;
+
+    fn try_from(d: ForestData) -> Result<Self, ForestDataError> {
         if d.trees.is_empty() || d.classes < 2 {
-            return Err("forest has no trees or fewer than two classes".into());
+            return Err(ForestDataError::Empty);
         }
-        for (i, t) in d.trees.iter().enumerate() {
-            t.check(d.classes).map_err(|e| format!("tree {i}: {e}"))?;
+        for (index, t) in d.trees.iter().enumerate() {
+            t.check(d.classes)
+                .map_err(|source| ForestDataError::Tree { index, source })?;
         }
         Ok(Forest {
             trees: d.trees,
@@ -137,19 +162,6 @@ impl TryFrom<ForestData> for Forest {
     }
 }
 
-/// What training measured.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct TrainStats {
-    pub samples: usize,
-    pub samples_per_class: Vec<usize>,
-    pub train_s: f64,
-    /// Out-of-bag misclassification rate (unweighted); NaN without bootstrap.
-    pub oob_error: f64,
-    /// Out-of-bag error with classes weighed equally.
-    pub oob_balanced_error: f64,
-    pub nodes: usize,
-}
-
 impl Forest {
     pub fn classes(&self) -> usize {
         self.classes
@@ -157,165 +169,6 @@ impl Forest {
 
     pub fn tree_count(&self) -> usize {
         self.trees.len()
-    }
-
-    /// Trains on `samples` with class indices in `0..classes`. Every class must have samples.
-    pub fn train(
-        samples: &Samples,
-        classes: usize,
-        params: &ForestParams,
-    ) -> Result<(Forest, TrainStats), String> {
-        let started = std::time::Instant::now();
-        let n = samples.len();
-        if n == 0 {
-            return Err("no training samples".into());
-        }
-        if !(2..=255).contains(&classes) {
-            return Err(format!("a forest needs 2 to 255 classes, got {classes}"));
-        }
-        let mut per_class = vec![0usize; classes];
-        for &c in &samples.classes {
-            let c = c as usize;
-            if c >= classes {
-                return Err(format!("sample class {c} is outside 0..{classes}"));
-            }
-            per_class[c] += 1;
-        }
-        if let Some(c) = per_class.iter().position(|&k| k == 0) {
-            return Err(format!("class {c} has no samples"));
-        }
-        let class_weight: Vec<f64> = per_class
-            .iter()
-            .map(|&k| {
-                if params.balance_classes {
-                    n as f64 / (classes as f64 * k as f64)
-                } else {
-                    1.0
-                }
-            })
-            .collect();
-        let allowed: Vec<usize> = if params.allowed_features.is_empty() {
-            (0..FEATURE_COUNT).collect()
-        } else {
-            params
-                .allowed_features
-                .iter()
-                .copied()
-                .filter(|&f| f < FEATURE_COUNT)
-                .collect()
-        };
-        if allowed.is_empty() {
-            return Err("no usable features selected".into());
-        }
-        let mtry = if params.features_per_split == 0 {
-            (allowed.len() as f64).sqrt().round() as usize
-        } else {
-            params.features_per_split.min(allowed.len())
-        };
-        let draws = if params.max_samples_per_tree == 0 {
-            n
-        } else {
-            n.min(params.max_samples_per_tree)
-        };
-        let trained: Vec<(Tree, Vec<u32>)> = (0..params.trees.max(1))
-            .into_par_iter()
-            .map(|t| {
-                let mut rng = Rng::fork(params.seed, t as u64);
-                let mut in_bag = vec![0u32; n];
-                let indices: Vec<u32> = if params.bootstrap {
-                    (0..draws).map(|_| rng.below(n) as u32).collect()
-                } else if draws < n {
-                    let mut all: Vec<u32> = (0..n as u32).collect();
-                    for i in 0..draws {
-                        let j = i + rng.below(n - i);
-                        all.swap(i, j);
-                    }
-                    all.truncate(draws);
-                    all
-                } else {
-                    (0..n as u32).collect()
-                };
-                for &i in &indices {
-                    in_bag[i as usize] += 1;
-                }
-                let mut builder = TreeBuilder {
-                    samples,
-                    classes,
-                    class_weight: &class_weight,
-                    params,
-                    allowed: &allowed,
-                    mtry,
-                    rng,
-                    tree: Tree {
-                        nodes: Vec::new(),
-                        leaf_of: Vec::new(),
-                        leaves: Vec::new(),
-                        depth: 0,
-                    },
-                };
-                let mut idx = indices;
-                builder.push_node();
-                builder.grow(0, &mut idx, 0);
-                (builder.tree, in_bag)
-            })
-            .collect();
-        let (trees, bags): (Vec<Tree>, Vec<Vec<u32>>) = trained.into_iter().unzip();
-        let forest = Forest {
-            trees,
-            classes,
-            params: params.clone(),
-        };
-        // Out-of-bag: each sample voted on only by trees that did not see it.
-        let (oob_error, oob_balanced_error) = if params.bootstrap || draws < n {
-            let results: Vec<Option<(u8, bool)>> = (0..n)
-                .into_par_iter()
-                .map(|i| {
-                    let mut acc = vec![0f32; classes];
-                    let mut voters = 0;
-                    for (tree, bag) in forest.trees.iter().zip(&bags) {
-                        if bag[i] == 0 {
-                            let leaf = tree.leaf(&samples.features[i]);
-                            for (a, p) in acc.iter_mut().zip(&tree.leaves[leaf..leaf + classes]) {
-                                *a += p;
-                            }
-                            voters += 1;
-                        }
-                    }
-                    (voters > 0)
-                        .then(|| (samples.classes[i], argmax(&acc) as u8 == samples.classes[i]))
-                })
-                .collect();
-            let mut wrong = vec![0usize; classes];
-            let mut seen = vec![0usize; classes];
-            for (c, ok) in results.into_iter().flatten() {
-                seen[c as usize] += 1;
-                wrong[c as usize] += (!ok) as usize;
-            }
-            let total: usize = seen.iter().sum();
-            let plain = if total > 0 {
-                wrong.iter().sum::<usize>() as f64 / total as f64
-            } else {
-                f64::NAN
-            };
-            let rates: Vec<f64> = seen
-                .iter()
-                .zip(&wrong)
-                .filter(|(s, _)| **s > 0)
-                .map(|(s, w)| *w as f64 / *s as f64)
-                .collect();
-            (plain, rates.iter().sum::<f64>() / rates.len().max(1) as f64)
-        } else {
-            (f64::NAN, f64::NAN)
-        };
-        let stats = TrainStats {
-            samples: n,
-            samples_per_class: per_class,
-            train_s: started.elapsed().as_secs_f64(),
-            oob_error,
-            oob_balanced_error,
-            nodes: forest.trees.iter().map(|t| t.nodes.len()).sum(),
-        };
-        Ok((forest, stats))
     }
 
     /// Class probabilities of one pixel (mean over trees), written to `out` (len = classes).
@@ -407,11 +260,11 @@ impl Tree {
     /// One step of a walk from node `i` (a leaf steps onto itself).
     #[inline(always)]
     fn step(&self, i: u32, f: &FeatureVector) -> u32 {
-        // SAFETY: every tree is either built by `TreeBuilder` or deserialised through
-        // `Tree::try_from(TreeData)`, which both guarantee that `i` (the root or a child index)
-        // is below `nodes.len()`, that a split's `child + 1` is too, and that `feature` is
-        // below FEATURE_COUNT (the length of `f`). This is the forest's hot loop: bounds checks
-        // here cost a third of inference time.
+        // SAFETY: every tree is either built by `train::TreeBuilder` or deserialised through
+        // `Forest::try_from(ForestData)` (which runs `Tree::check`); both guarantee that `i`
+        // (the root or a child index) is below `nodes.len()`, that a split's `child + 1` is
+        // too, and that `feature` is below FEATURE_COUNT (the length of `f`). This is the
+        // forest's hot loop: bounds checks here cost a third of inference time.
         unsafe {
             let n = self.nodes.get_unchecked(i as usize);
             n.child + (*f.get_unchecked(n.feature as usize) > n.threshold) as u32
@@ -419,18 +272,16 @@ impl Tree {
     }
 
     /// Checks the invariants `step` relies on.
-    fn check(&self, classes: usize) -> Result<(), String> {
+    fn check(&self, classes: usize) -> Result<(), TreeError> {
         let n = self.nodes.len();
         if n == 0 || self.leaf_of.len() != n {
-            return Err("tree has no nodes or a leaf table of the wrong size".into());
+            return Err(TreeError::Shape);
         }
         for (i, node) in self.nodes.iter().enumerate() {
             match self.leaf_of[i] {
                 INTERNAL => {
                     if node.feature as usize >= FEATURE_COUNT || node.child as usize + 1 >= n {
-                        return Err(format!(
-                            "node {i} splits on a feature or child that does not exist"
-                        ));
+                        return Err(TreeError::Split { node: i });
                     }
                 }
                 at => {
@@ -438,7 +289,7 @@ impl Tree {
                         || node.threshold != u8::MAX
                         || at as usize + classes > self.leaves.len()
                     {
-                        return Err(format!("leaf {i} is malformed"));
+                        return Err(TreeError::Leaf { node: i });
                     }
                 }
             }
@@ -460,170 +311,10 @@ impl Tree {
     }
 }
 
-struct TreeBuilder<'a> {
-    samples: &'a Samples,
-    classes: usize,
-    class_weight: &'a [f64],
-    params: &'a ForestParams,
-    allowed: &'a [usize],
-    mtry: usize,
-    rng: Rng,
-    tree: Tree,
-}
-
-impl TreeBuilder<'_> {
-    fn impurity(&self, counts: &[f64], total: f64) -> f64 {
-        if total <= 0.0 {
-            return 0.0;
-        }
-        match self.params.criterion {
-            Criterion::Gini => {
-                1.0 - counts
-                    .iter()
-                    .map(|c| (c / total) * (c / total))
-                    .sum::<f64>()
-            }
-            Criterion::Entropy => -counts
-                .iter()
-                .filter(|&&c| c > 0.0)
-                .map(|c| (c / total) * (c / total).ln())
-                .sum::<f64>(),
-        }
-    }
-
-    fn make_leaf(&mut self, node: usize, idx: &[u32]) {
-        let mut counts = vec![0f64; self.classes];
-        for &i in idx {
-            let c = self.samples.classes[i as usize] as usize;
-            counts[c] += self.class_weight[c];
-        }
-        let total: f64 = counts.iter().sum::<f64>().max(1e-12);
-        let start = self.tree.leaves.len() as u32;
-        self.tree
-            .leaves
-            .extend(counts.iter().map(|c| (c / total) as f32));
-        self.tree.nodes[node] = Node {
-            feature: 0,
-            threshold: u8::MAX,
-            child: node as u32,
-        };
-        self.tree.leaf_of[node] = start;
-    }
-
-    fn push_node(&mut self) -> usize {
-        self.tree.nodes.push(Node {
-            feature: 0,
-            threshold: u8::MAX,
-            child: 0,
-        });
-        self.tree.leaf_of.push(INTERNAL);
-        self.tree.nodes.len() - 1
-    }
-
-    fn grow(&mut self, node: usize, idx: &mut [u32], depth: usize) {
-        self.tree.depth = self.tree.depth.max(depth as u32);
-        let k = self.classes;
-        let min_leaf = self.params.min_samples_leaf.max(1);
-        let first = self.samples.classes[idx[0] as usize];
-        let pure = idx
-            .iter()
-            .all(|&i| self.samples.classes[i as usize] == first);
-        if depth >= self.params.max_depth || idx.len() < 2 * min_leaf || pure {
-            self.make_leaf(node, idx);
-            return;
-        }
-        // Coarse bins on small nodes: the split search costs bins × classes per feature.
-        let shift = if idx.len() > 1024 { 0 } else { 2 };
-        let bins = 256 >> shift;
-        let mut parent = vec![0f64; k];
-        for &i in idx.iter() {
-            let c = self.samples.classes[i as usize] as usize;
-            parent[c] += self.class_weight[c];
-        }
-        let parent_total: f64 = parent.iter().sum();
-        let parent_impurity = self.impurity(&parent, parent_total);
-        let mut best: Option<(f64, usize, u8)> = None;
-        let mut hist = vec![0f64; bins * k];
-        let mut count = vec![0usize; bins];
-        let mut tried = [false; FEATURE_COUNT];
-        let mut attempts = 0;
-        let mut left = vec![0f64; k];
-        let mut right = vec![0f64; k];
-        while attempts < self.mtry.max(1) {
-            let f = self.allowed[self.rng.below(self.allowed.len())];
-            if tried[f] {
-                continue;
-            }
-            tried[f] = true;
-            attempts += 1;
-            hist.fill(0.0);
-            count.fill(0);
-            for &i in idx.iter() {
-                let b = (self.samples.features[i as usize][f] >> shift) as usize;
-                let c = self.samples.classes[i as usize] as usize;
-                hist[b * k + c] += self.class_weight[c];
-                count[b] += 1;
-            }
-            left.fill(0.0);
-            let mut left_n = 0usize;
-            for b in 0..bins - 1 {
-                for c in 0..k {
-                    left[c] += hist[b * k + c];
-                }
-                left_n += count[b];
-                if count[b] == 0 || left_n < min_leaf {
-                    continue;
-                }
-                if idx.len() - left_n < min_leaf {
-                    break;
-                }
-                let lt: f64 = left.iter().sum();
-                for c in 0..k {
-                    right[c] = parent[c] - left[c];
-                }
-                let rt = parent_total - lt;
-                let score =
-                    (lt * self.impurity(&left, lt) + rt * self.impurity(&right, rt)) / parent_total;
-                if best.is_none_or(|(s, _, _)| score < s - 1e-12) {
-                    // Threshold in u8 units: the top of bin b.
-                    let threshold = (((b + 1) << shift) - 1) as u8;
-                    best = Some((score, f, threshold));
-                }
-            }
-        }
-        let Some((_, feature, threshold)) = best.filter(|(s, _, _)| *s < parent_impurity - 1e-9)
-        else {
-            self.make_leaf(node, idx);
-            return;
-        };
-        // Partition in place: ≤ threshold first.
-        let mut split = 0;
-        for j in 0..idx.len() {
-            if self.samples.features[idx[j] as usize][feature] <= threshold {
-                idx.swap(j, split);
-                split += 1;
-            }
-        }
-        if split == 0 || split == idx.len() {
-            self.make_leaf(node, idx);
-            return;
-        }
-        let child = self.push_node();
-        self.push_node();
-        self.tree.nodes[node] = Node {
-            feature: feature as u16,
-            threshold,
-            child: child as u32,
-        };
-        let (l, r) = idx.split_at_mut(split);
-        self.grow(child, l, depth + 1);
-        self.grow(child + 1, r, depth + 1);
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::rng::Rng;
 
     /// Three classes separated by thresholds on two features, plus noise features.
     fn toy(n: usize, seed: u64) -> Samples {
@@ -745,6 +436,7 @@ mod tests {
         assert!(
             Forest::train(&only01, 3, &ForestParams::default())
                 .unwrap_err()
+                .to_string()
                 .contains("class 2 has no samples")
         );
     }
