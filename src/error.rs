@@ -36,6 +36,13 @@ pub enum Error {
         #[source]
         source: std::io::Error,
     },
+    /// Removing a file failed (an autosave no longer needed).
+    #[error("{}: cannot remove: {source}", path.display())]
+    Remove {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
     /// The user cancelled long work.
     #[error("cancelled")]
     Cancelled,

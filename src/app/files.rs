@@ -108,12 +108,15 @@ impl Files {
     }
 }
 
-/// Removes a file that may not exist; says why when it does and cannot be removed.
-fn remove_if_present(path: &Path) -> Result<(), String> {
+/// Removes a file that may not exist; an error names it when it exists and cannot be removed.
+fn remove_if_present(path: &Path) -> Result<(), Error> {
     match std::fs::remove_file(path) {
         Ok(()) => Ok(()),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
-        Err(e) => Err(format!("{}: cannot remove: {e}", path.display())),
+        Err(source) => Err(Error::Remove {
+            path: path.to_path_buf(),
+            source,
+        }),
     }
 }
 

@@ -163,6 +163,7 @@ pub struct OverlayResources {
 
 struct ViewTarget {
     size: [u32; 2],
+    ids: wgpu::Texture,
     ids_view: wgpu::TextureView,
     depth_view: wgpu::TextureView,
     camera_buffer: wgpu::Buffer,
@@ -341,11 +342,13 @@ impl OverlayResources {
                     dimension: wgpu::TextureDimension::D2,
                     format,
                     usage: wgpu::TextureUsages::RENDER_ATTACHMENT
-                        | wgpu::TextureUsages::TEXTURE_BINDING,
+                        | wgpu::TextureUsages::TEXTURE_BINDING
+                        | wgpu::TextureUsages::COPY_SRC,
                     view_formats: &[],
                 })
             };
-            let ids_view = texture("overlay ids", IDS_FORMAT).create_view(&Default::default());
+            let ids = texture("overlay ids", IDS_FORMAT);
+            let ids_view = ids.create_view(&Default::default());
             let depth_view =
                 texture("overlay depth", DEPTH_FORMAT).create_view(&Default::default());
             let buffer = |label, size| {
@@ -388,6 +391,7 @@ impl OverlayResources {
                 key,
                 ViewTarget {
                     size,
+                    ids,
                     ids_view,
                     depth_view,
                     camera_buffer,
@@ -402,6 +406,63 @@ impl OverlayResources {
         }
         self.views.get_mut(&key).expect("inserted above")
     }
+}
+
+/// The structure ids the last `prepare` of view `key` rendered, read back from the GPU: per
+/// target pixel (row-major) the front-most visible structure's id (red channel) and the
+/// hidden structures' id (green), 0 where none. What the tests compare with the CPU
+/// rasteriser, to keep the shader's copy of eq. 10 the same as `Intrinsics::project`.
+pub fn read_ids(render_state: &egui_wgpu::RenderState, key: u64) -> Option<Vec<[u8; 2]>> {
+    let (device, queue) = (&render_state.device, &render_state.queue);
+    let renderer = render_state.renderer.read();
+    let target = renderer
+        .callback_resources
+        .get::<OverlayResources>()?
+        .views
+        .get(&key)?;
+    let [w, h] = target.size;
+    let row = (4 * w).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+    let buffer = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("overlay ids read-back"),
+        size: (row * h) as u64,
+        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+        mapped_at_creation: false,
+    });
+    let mut encoder = device.create_command_encoder(&Default::default());
+    encoder.copy_texture_to_buffer(
+        target.ids.as_image_copy(),
+        wgpu::TexelCopyBufferInfo {
+            buffer: &buffer,
+            layout: wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(row),
+                rows_per_image: Some(h),
+            },
+        },
+        wgpu::Extent3d {
+            width: w,
+            height: h,
+            depth_or_array_layers: 1,
+        },
+    );
+    queue.submit([encoder.finish()]);
+    let (tx, rx) = std::sync::mpsc::channel();
+    buffer.map_async(wgpu::MapMode::Read, .., move |r| {
+        let _ = tx.send(r);
+    });
+    device.poll(wgpu::PollType::wait_indefinitely()).ok()?;
+    rx.recv().ok()?.ok()?;
+    let data = buffer.get_mapped_range(..).ok()?;
+    Some(
+        (0..h as usize)
+            .flat_map(|y| {
+                let line = &data[y * row as usize..][..4 * w as usize];
+                line.chunks_exact(4)
+                    .map(|px| [px[0], px[1]])
+                    .collect::<Vec<_>>()
+            })
+            .collect(),
+    )
 }
 
 /// Writes `data` into `slot`, growing the buffer when it is too small.

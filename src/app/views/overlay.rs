@@ -61,43 +61,16 @@ pub(super) fn overlay_callback(
     let (scene, model) = (shown.doc.scene.as_ref()?, shown.doc.model.as_ref()?);
     let state = shown.doc.state_at(shown.view.frame)?;
     let cam = scene.cameras.get(c)?;
-    let intr = state.intrinsics.get(c)?;
-    let deformed = model.deformed(&state.shape);
-    let posed = model.posed(&state.affine, &deformed);
-    let mut vertices = Vec::new();
-    let (mut visible, mut hidden) = (Vec::new(), Vec::new());
-    let (mut near, mut far) = (f64::INFINITY, 0f64);
-    for (i, (s, pts)) in model.structures.iter().zip(&posed).enumerate() {
-        let base = vertices.len() as u32;
-        let id = (s.part + 1) as f32;
-        for &p in pts {
-            let q = cam.extrinsics.apply(p);
-            near = near.min(q.z);
-            far = far.max(q.z);
-            vertices.push(Vertex {
-                position_mm: [q.x as f32, q.y as f32, q.z as f32],
-                id,
-            });
-        }
-        let list = if model.structures[i].visible {
-            &mut visible
-        } else {
-            &mut hidden
-        };
-        for f in &s.faces {
-            list.extend(f.iter().map(|&v| base + v));
-        }
-    }
-    if vertices.is_empty() || !near.is_finite() {
-        return None;
-    }
     let ppp = ctx.pixels_per_point();
     let target_px = [
         (rect.width() * ppp).round().max(1.0) as u32,
         (rect.height() * ppp).round().max(1.0) as u32,
     ];
-    let scale = image_rect.width() / cam.width as f32 * ppp;
-    let origin = (image_rect.min - rect.min) * ppp;
+    let placement = TargetPlacement {
+        target_px,
+        scale: image_rect.width() / cam.width as f32 * ppp,
+        origin_px: ((image_rect.min - rect.min) * ppp).to_pos2(),
+    };
     let mut style = StyleUniform::default();
     for (i, s) in scene
         .structures
@@ -132,8 +105,64 @@ pub(super) fn overlay_callback(
             0.0,
         ];
     }
-    let callback = OverlayCallback {
-        key: egui::Id::unique(("overlay", c)).value(),
+    let key = egui::Id::unique(("overlay", c)).value();
+    let callback = mesh_callback(scene, model, &state, c, &placement, style, key)?;
+    Some(egui::Shape::Callback(
+        egui_wgpu::Callback::new_paint_callback(rect, callback),
+    ))
+}
+
+/// Where camera pixels land in the overlay's off-screen target: the target's size, target
+/// pixels per camera pixel, and the target position of the camera image's corner (0, 0).
+#[derive(Debug, Clone, Copy)]
+pub struct TargetPlacement {
+    pub target_px: [u32; 2],
+    pub scale: f32,
+    pub origin_px: egui::Pos2,
+}
+
+/// The overlay of camera `c` for a fitted state: every structure's posed mesh in the camera's
+/// frame, the camera's intrinsics for the shader's projection (the same eq. 10 as
+/// `Intrinsics::project`, in f32) and where its image sits in the target.
+pub fn mesh_callback(
+    scene: &crate::scene::Scene,
+    model: &crate::fit::Model,
+    state: &crate::fit::FitState,
+    c: usize,
+    placement: &TargetPlacement,
+    style: StyleUniform,
+    key: u64,
+) -> Option<OverlayCallback> {
+    let cam = scene.cameras.get(c)?;
+    let intr = state.intrinsics.get(c)?;
+    let deformed = model.deformed(&state.shape);
+    let posed = model.posed(&state.affine, &deformed);
+    let mut vertices = Vec::new();
+    let (mut visible, mut hidden) = (Vec::new(), Vec::new());
+    let (mut near, mut far) = (f64::INFINITY, 0f64);
+    for (s, pts) in model.structures.iter().zip(&posed) {
+        let base = vertices.len() as u32;
+        let id = (s.part + 1) as f32;
+        for &p in pts {
+            let q = cam.extrinsics.apply(p);
+            near = near.min(q.z);
+            far = far.max(q.z);
+            vertices.push(Vertex {
+                position_mm: [q.x as f32, q.y as f32, q.z as f32],
+                id,
+            });
+        }
+        let list = if s.visible { &mut visible } else { &mut hidden };
+        for f in &s.faces {
+            list.extend(f.iter().map(|&v| base + v));
+        }
+    }
+    if vertices.is_empty() || !near.is_finite() {
+        return None;
+    }
+    let (scale, origin, target_px) = (placement.scale, placement.origin_px, placement.target_px);
+    Some(OverlayCallback {
+        key,
         target_px,
         camera: CameraUniform {
             k: [
@@ -161,8 +190,5 @@ pub(super) fn overlay_callback(
         vertices: Arc::new(vertices),
         visible_indices: Arc::new(visible),
         hidden_indices: Arc::new(hidden),
-    };
-    Some(egui::Shape::Callback(
-        egui_wgpu::Callback::new_paint_callback(rect, callback),
-    ))
+    })
 }
