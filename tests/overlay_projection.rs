@@ -87,12 +87,12 @@ fn the_shader_projects_as_the_camera_model_does() {
         // The CPU's view of the same: front-most visible structure, and the hidden one's
         // projection, as ids (structure part + 1).
         let id_of = |i: usize| model.structures[i].part as u8 + 1;
-        let front = rasterize(
-            cam,
-            &model.objects(&posed, &visible),
-            &RasterOptions::default(),
-        );
-        let cpu_visible: Vec<u8> = front
+        let ids = |which: &[usize]| -> Vec<u8> {
+            rasterize(
+                cam,
+                &model.objects(&posed, which),
+                &RasterOptions::default(),
+            )
             .object
             .data
             .iter()
@@ -100,27 +100,12 @@ fn the_shader_projects_as_the_camera_model_does() {
                 if o == NO_OBJECT {
                     0
                 } else {
-                    id_of(visible[o as usize])
+                    id_of(which[o as usize])
                 }
             })
-            .collect();
-        let behind = rasterize(
-            cam,
-            &model.objects(&posed, &hidden),
-            &RasterOptions::default(),
-        );
-        let cpu_hidden: Vec<u8> = behind
-            .object
-            .data
-            .iter()
-            .map(|&o| {
-                if o == NO_OBJECT {
-                    0
-                } else {
-                    id_of(hidden[o as usize])
-                }
-            })
-            .collect();
+            .collect()
+        };
+        let (cpu_visible, cpu_hidden) = (ids(&visible), ids(&hidden));
         for (channel, cpu) in [(0, &cpu_visible), (1, &cpu_hidden)] {
             let covered = cpu.iter().filter(|&&v| v != 0).count();
             assert!(
