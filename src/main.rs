@@ -263,10 +263,12 @@ fn run(cli: Cli) -> Result<()> {
 fn read_fit_config(path: &std::path::Path) -> Result<FitConfig> {
     let bad = |problem: String| endofuse::InputError::new(path, problem);
     let text = std::fs::read_to_string(path).map_err(|e| bad(format!("cannot read: {e}")))?;
-    Ok(
-        FitConfig::from_json(&text)
-            .map_err(|e| bad(format!("malformed fit configuration: {e}")))?,
-    )
+    let config = FitConfig::from_json(&text)
+        .map_err(|e| bad(format!("malformed fit configuration: {e}")))?;
+    config
+        .validate()
+        .map_err(|e| bad(format!("fit configuration: {e}")))?;
+    Ok(config)
 }
 
 /// Opens the desktop app (blocks until its window closes).

@@ -354,4 +354,10 @@ fn a_run_is_reproduced_from_its_metrics_and_its_config_is_honoured() {
         "{err}"
     );
     assert_eq!(err.lines().count(), 1, "{err}");
+    // So is a well-formed one the fit cannot work with.
+    std::fs::write(&stiff, r#"{"placement": {"levels": [40]}}"#).unwrap();
+    let run = track(&scene, &tmp("config-5"), &stiff_args);
+    assert_eq!(run.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(err.contains("placement.levels"), "{err}");
 }

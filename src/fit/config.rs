@@ -77,6 +77,9 @@ pub struct SolverConfig {
     pub target_tries: usize,
     /// Halvings tried for the Newton step on the energy itself, when the first fails.
     pub newton_tries: usize,
+    /// At this pyramid level and coarser the affine moves only rigidly: a 12-dof fit to a
+    /// blurred silhouette drifts into shears.
+    pub rigid_from_level: usize,
 }
 
 impl Default for SolverConfig {
@@ -86,12 +89,15 @@ impl Default for SolverConfig {
             lm_floor: 1e-6,
             target_tries: 3,
             newton_tries: 5,
+            rigid_from_level: 2,
         }
     }
 }
 
 /// Weights of the priors (`fit::priors`), relative to the data's own curvature unless a unit is
-/// given.
+/// given. The phases replace some of them: the first frame and the placement set their own
+/// pose damping (so `pose_damping` here is that of tracked frames), and tracked frames their
+/// own shape prior (so `shape` here is that of the first frame).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct PriorConfig {
@@ -108,6 +114,10 @@ pub struct PriorConfig {
     pub shape_damping: f64,
     /// Tikhonov weight of the intrinsics towards the previous frame's.
     pub camera_damping: f64,
+    /// The camera damping of each corrected intrinsic (fx, fy, cx, cy, k1) relative to its own
+    /// curvature: k1 held far harder, since zoom barely moves distortion (paper §IV-A) and a
+    /// free k1 mimics a focal change.
+    pub camera_relative: [f64; 5],
 }
 
 impl Default for PriorConfig {
@@ -118,6 +128,7 @@ impl Default for PriorConfig {
             shape: 2.0,
             shape_damping: 0.0,
             camera_damping: 1.0,
+            camera_relative: [1.0, 1.0, 1.0, 1.0, 100.0],
         }
     }
 }
@@ -342,6 +353,11 @@ pub struct PlacementConfig {
     pub rolls: usize,
     /// Best hypotheses refined by a rigid fit.
     pub refined: usize,
+    /// Fewer foreground pixels than this (at the scoring level) and the organ is not found.
+    pub min_area_px: f64,
+    /// Depth a hypothesis is rendered at to learn its projected area (mm); the depth it is
+    /// placed at then follows from the area the forest sees.
+    pub reference_depth_mm: f64,
     /// Pyramid levels, rounds and steps of the refinement.
     pub levels: Vec<usize>,
     pub rounds: usize,
@@ -359,6 +375,8 @@ impl Default for PlacementConfig {
             directions: 26,
             rolls: 8,
             refined: 6,
+            min_area_px: 20.0,
+            reference_depth_mm: 200.0,
             levels: vec![2, 1, 0],
             rounds: 4,
             steps: 3,
@@ -467,7 +485,7 @@ impl FitConfig {
         match zoom {
             Zoom::Off => {}
             Zoom::PoseOnly => p.priors.pose_damping *= z.pose_only_damping_factor,
-            Zoom::Cameras if mode == Mode::LSC => {
+            Zoom::Cameras if p.mode == Mode::LSC => {
                 p.correct_cameras = true;
                 p.priors.pose_damping *= z.cameras_pose_damping_factor;
                 p.priors.shape_damping = p.priors.shape_damping.max(z.cameras_shape_damping);
@@ -533,6 +551,339 @@ impl FitConfig {
     }
 }
 
+/// A configuration value outside what the fit can work with.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{field} is {value}, but {expected}")]
+pub struct ConfigError {
+    /// The key's path in the configuration, e.g. `stereo.half_window`.
+    pub field: &'static str,
+    pub value: String,
+    pub expected: &'static str,
+}
+
+/// Pyramid levels a configuration may name (each halves the image).
+pub const MAX_LEVEL: usize = 8;
+
+/// Checks one value.
+fn check(
+    field: &'static str,
+    ok: bool,
+    value: impl std::fmt::Display,
+    expected: &'static str,
+) -> Result<(), ConfigError> {
+    if ok {
+        Ok(())
+    } else {
+        Err(ConfigError {
+            field,
+            value: value.to_string(),
+            expected,
+        })
+    }
+}
+
+/// A finite number at least zero.
+fn non_negative(field: &'static str, v: f64) -> Result<(), ConfigError> {
+    check(
+        field,
+        v.is_finite() && v >= 0.0,
+        v,
+        "it must be a finite number ≥ 0",
+    )
+}
+
+/// A finite number above zero.
+fn positive(field: &'static str, v: f64) -> Result<(), ConfigError> {
+    check(
+        field,
+        v.is_finite() && v > 0.0,
+        v,
+        "it must be a finite number > 0",
+    )
+}
+
+/// A count inside `range`.
+fn count(
+    field: &'static str,
+    v: usize,
+    range: std::ops::RangeInclusive<usize>,
+    expected: &'static str,
+) -> Result<(), ConfigError> {
+    check(field, range.contains(&v), v, expected)
+}
+
+impl FitConfig {
+    /// Refuses values the fit cannot work with (a read-back configuration is user input):
+    /// non-finite or negative weights, empty ranges, pyramid levels beyond [`MAX_LEVEL`].
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let s = &self.solver;
+        non_negative("solver.lm", s.lm)?;
+        positive("solver.lm_floor", s.lm_floor)?;
+        count(
+            "solver.target_tries",
+            s.target_tries,
+            1..=30,
+            "it must be 1 to 30",
+        )?;
+        count(
+            "solver.newton_tries",
+            s.newton_tries,
+            0..=30,
+            "it must be 0 to 30",
+        )?;
+        count(
+            "solver.rigid_from_level",
+            s.rigid_from_level,
+            0..=MAX_LEVEL,
+            "it must be 0 to 8",
+        )?;
+        let e = &self.energy;
+        count(
+            "energy.half_length",
+            e.half_length,
+            2..=64,
+            "it must be 2 to 64",
+        )?;
+        positive("energy.heaviside_px", e.heaviside_px)?;
+        let floor = e.probability_floor as f64;
+        check(
+            "energy.probability_floor",
+            floor > 0.0 && floor < 0.5,
+            floor,
+            "it must lie between 0 and 0.5",
+        )?;
+        positive(
+            "energy.saturated_line_variance_px2",
+            e.saturated_line_variance_px2,
+        )?;
+        non_negative(
+            "energy.parabola_below_variance_px2",
+            e.parabola_below_variance_px2,
+        )?;
+        let [lo, hi] = e.parabola_variance_px2;
+        check(
+            "energy.parabola_variance_px2",
+            lo.is_finite() && hi.is_finite() && lo > 0.0 && lo <= hi,
+            format!("[{lo}, {hi}]"),
+            "it must be [low, high] with 0 < low ≤ high",
+        )?;
+        positive(
+            "energy.min_softmin_variance_px2",
+            e.min_softmin_variance_px2,
+        )?;
+        non_negative("energy.rim_check_px", e.rim_check_px)?;
+        positive("energy.rim_depth_tolerance", e.rim_depth_tolerance)?;
+        check(
+            "energy.line_cell_px",
+            e.line_cell_px.is_finite() && e.line_cell_px >= 0.5,
+            e.line_cell_px,
+            "it must be at least 0.5",
+        )?;
+        non_negative("energy.confidence_band_px", e.confidence_band_px)?;
+        let p = &self.priors;
+        non_negative("priors.pose_damping", p.pose_damping)?;
+        non_negative("priors.strain", p.strain)?;
+        non_negative("priors.shape", p.shape)?;
+        non_negative("priors.shape_damping", p.shape_damping)?;
+        non_negative("priors.camera_damping", p.camera_damping)?;
+        for v in p.camera_relative {
+            non_negative("priors.camera_relative", v)?;
+        }
+        let st = &self.stereo;
+        non_negative("stereo.weight", st.weight)?;
+        count(
+            "stereo.max_points",
+            st.max_points,
+            1..=100_000,
+            "it must be 1 to 100000",
+        )?;
+        check(
+            "stereo.half_window",
+            (1..=32).contains(&st.half_window),
+            st.half_window,
+            "it must be 1 to 32",
+        )?;
+        check(
+            "stereo.search_px",
+            (1..=64).contains(&st.search_px),
+            st.search_px,
+            "it must be 1 to 64",
+        )?;
+        check(
+            "stereo.min_ncc",
+            (-1.0..=1.0).contains(&st.min_ncc),
+            st.min_ncc,
+            "it must lie in [-1, 1]",
+        )?;
+        positive("stereo.sigma_px", st.sigma_px)?;
+        positive("stereo.huber", st.huber)?;
+        check(
+            "stereo.max_partner_angle_deg",
+            (0.0..=180.0).contains(&st.max_partner_angle_deg),
+            st.max_partner_angle_deg,
+            "it must lie in [0, 180]",
+        )?;
+        let f = &self.first_frame;
+        count(
+            "first_frame.coarser_levels",
+            f.coarser_levels,
+            0..=4,
+            "it must be 0 to 4",
+        )?;
+        count("first_frame.rounds", f.rounds, 1..=50, "it must be 1 to 50")?;
+        count("first_frame.steps", f.steps, 1..=100, "it must be 1 to 100")?;
+        count(
+            "first_frame.rebuild_every",
+            f.rebuild_every,
+            1..=1000,
+            "it must be at least 1",
+        )?;
+        non_negative("first_frame.pose_damping", f.pose_damping)?;
+        check(
+            "first_frame.stereo_search_px",
+            (1..=64).contains(&f.stereo_search_px),
+            f.stereo_search_px,
+            "it must be 1 to 64",
+        )?;
+        let t = &self.tracked_frame;
+        count(
+            "tracked_frame.rounds",
+            t.rounds,
+            1..=50,
+            "it must be 1 to 50",
+        )?;
+        count(
+            "tracked_frame.steps",
+            t.steps,
+            1..=100,
+            "it must be 1 to 100",
+        )?;
+        count(
+            "tracked_frame.rebuild_every",
+            t.rebuild_every,
+            1..=1000,
+            "it must be at least 1",
+        )?;
+        non_negative("tracked_frame.shape_prior", t.shape_prior)?;
+        let z = &self.zoom;
+        non_negative(
+            "zoom.cameras_pose_damping_factor",
+            z.cameras_pose_damping_factor,
+        )?;
+        non_negative("zoom.cameras_shape_damping", z.cameras_shape_damping)?;
+        count(
+            "zoom.cameras_min_rounds",
+            z.cameras_min_rounds,
+            0..=50,
+            "it must be 0 to 50",
+        )?;
+        count(
+            "zoom.cameras_rebuild_every",
+            z.cameras_rebuild_every,
+            1..=1000,
+            "it must be at least 1",
+        )?;
+        non_negative("zoom.camera_damping_factor", z.camera_damping_factor)?;
+        non_negative("zoom.pose_only_damping_factor", z.pose_only_damping_factor)?;
+        count(
+            "zoom.settle_frames",
+            z.settle_frames,
+            0..=1000,
+            "it must be 0 to 1000",
+        )?;
+        count(
+            "zoom.onset_frames",
+            z.onset_frames,
+            0..=100,
+            "it must be 0 to 100",
+        )?;
+        positive("zoom.detector.rate_two_frames", z.detector.rate_two_frames)?;
+        positive("zoom.detector.rate_one_frame", z.detector.rate_one_frame)?;
+        positive("zoom.detector.calm_rate", z.detector.calm_rate)?;
+        count(
+            "zoom.detector.calm_frames",
+            z.detector.calm_frames,
+            1..=1000,
+            "it must be at least 1",
+        )?;
+        count(
+            "zoom.motion.history_frames",
+            z.motion.history_frames,
+            3..=1000,
+            "it must be 3 to 1000",
+        )?;
+        let k = &self.tracking;
+        check(
+            "tracking.fit_width_px",
+            k.fit_width_px >= 16,
+            k.fit_width_px,
+            "it must be at least 16",
+        )?;
+        count(
+            "tracking.max_fit_level",
+            k.max_fit_level,
+            0..=4,
+            "it must be 0 to 4",
+        )?;
+        check(
+            "tracking.lost_confidence",
+            (0.0..=1.0).contains(&k.lost_confidence),
+            k.lost_confidence,
+            "it must lie in [0, 1]",
+        )?;
+        count(
+            "tracking.reinit_after_lost",
+            k.reinit_after_lost,
+            1..=10_000,
+            "it must be at least 1",
+        )?;
+        non_negative("tracking.occluder_margin_px", k.occluder_margin_px as f64)?;
+        check(
+            "tracking.occluder_background",
+            (0.0..=1.0).contains(&k.occluder_background),
+            k.occluder_background,
+            "it must lie in [0, 1]",
+        )?;
+        let pl = &self.placement;
+        count(
+            "placement.score_level",
+            pl.score_level,
+            0..=4,
+            "it must be 0 to 4",
+        )?;
+        count(
+            "placement.directions",
+            pl.directions,
+            1..=10_000,
+            "it must be 1 to 10000",
+        )?;
+        count("placement.rolls", pl.rolls, 1..=360, "it must be 1 to 360")?;
+        count(
+            "placement.refined",
+            pl.refined,
+            1..=1000,
+            "it must be 1 to 1000",
+        )?;
+        non_negative("placement.min_area_px", pl.min_area_px)?;
+        positive("placement.reference_depth_mm", pl.reference_depth_mm)?;
+        check(
+            "placement.levels",
+            !pl.levels.is_empty() && pl.levels.iter().all(|&l| l <= MAX_LEVEL),
+            format!("{:?}", pl.levels),
+            "it must list 1 or more levels, each 0 to 8",
+        )?;
+        count("placement.rounds", pl.rounds, 1..=50, "it must be 1 to 50")?;
+        count("placement.steps", pl.steps, 1..=100, "it must be 1 to 100")?;
+        count(
+            "placement.rebuild_every",
+            pl.rebuild_every,
+            1..=1000,
+            "it must be at least 1",
+        )?;
+        non_negative("placement.pose_damping", pl.pose_damping)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -584,6 +935,20 @@ mod tests {
         assert_eq!(partial.priors.shape, 4.0);
         assert_eq!(partial.priors.pose_damping, c.priors.pose_damping);
         assert!(serde_json::from_str::<FitConfig>(r#"{"prior": {}}"#).is_err());
+        assert_eq!(c.validate(), Ok(()));
+        // Values the fit cannot work with are refused, naming the key.
+        for bad in [
+            r#"{"placement": {"levels": [40]}}"#,
+            r#"{"energy": {"heaviside_px": 0}}"#,
+            r#"{"solver": {"lm_floor": -1}}"#,
+            r#"{"tracking": {"max_fit_level": 30}}"#,
+            r#"{"stereo": {"half_window": 0}}"#,
+        ] {
+            let parsed: FitConfig = serde_json::from_str(bad).unwrap();
+            let err = parsed.validate().unwrap_err();
+            let key = bad.split('"').nth(3).unwrap();
+            assert!(err.field.ends_with(key), "{bad}: {err}");
+        }
         // What metrics.json holds reads back as the same configuration.
         let metrics = serde_json::json!({ "mode": "LS", "config": c.resolved(Mode::LS, 1) });
         assert_eq!(FitConfig::from_json(&metrics.to_string()).unwrap(), c);

@@ -111,7 +111,7 @@ pub fn automatic_pose(
             centre += DVec2::new((i % p0.width) as f64, (i / p0.width) as f64);
         }
     }
-    if area < 20.0 {
+    if area < placement.min_area_px {
         return Err(InputError::new(&scene.origin, format!("cannot find the organ in frame {t} to place the model automatically: add seeds, or give an initial_pose")).into());
     }
     centre /= area;
@@ -152,7 +152,7 @@ pub fn automatic_pose(
         for roll in 0..placement.rolls {
             let rot = rotation_from_vector(d * (roll as f64 * roll_angle)) * align_z(d);
             // Depth from the area: projected area falls with the square of depth.
-            let z_ref = 200.0;
+            let z_ref = placement.reference_depth_mm;
             let reference = rasters(&place(rot, z_ref), &cams[..1]);
             let a_ref = reference[0].coverage().count() as f64;
             if a_ref < 1.0 {

@@ -207,7 +207,9 @@ fn add_priors<'a>(
             BlockPriors::Shape(shape)
         }
         Block::Cameras(_) => {
-            let damping = CameraDamping::new(prev, params.priors.camera_damping, &eq.h);
+            let priors = &params.priors;
+            let damping =
+                CameraDamping::new(prev, priors.camera_damping, priors.camera_relative, &eq.h);
             damping.add_normal_equations(state, eq);
             BlockPriors::Cameras(damping)
         }
@@ -220,7 +222,7 @@ fn shared_camera_increment(cameras: usize) -> DMatrix<f64> {
     DMatrix::from_fn(5 * cameras, 5, |r, c| if r % 5 == c { 1.0 } else { 0.0 })
 }
 
-/// Fits one frame from `start`; `prev` anchors the damping. `correct_cameras` enables the π
+/// Fits one frame from `start`; `prev` anchors the damping. `params.correct_cameras` enables the π
 /// block (LSC inside a zoom change).
 pub fn fit_frame(
     ctx: &FrameContext,
@@ -268,7 +270,7 @@ pub fn fit_frame(
             for &block in &blocks {
                 // The affine only moves rigidly at coarse levels: a 12-dof fit to a blurred
                 // silhouette drifts into shears.
-                let block = if block == Block::Affine && level >= 2 {
+                let block = if block == Block::Affine && level >= params.solver.rigid_from_level {
                     Block::Rigid
                 } else {
                     block

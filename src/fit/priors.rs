@@ -184,13 +184,18 @@ impl<'a> ShapePrior<'a> {
         }
     }
 
+    /// The Mahalanobis precision of weight k, weight / σ_k² (σ² kept above 1e-12 mm²).
+    fn precision(&self, k: usize) -> f64 {
+        self.weight / (self.sigma_mm[k] * self.sigma_mm[k]).max(1e-12)
+    }
+
     /// The Mahalanobis part alone, 0.5 · weight · Σ (w_k / σ_k)².
     pub fn mahalanobis_energy(&self, state: &FitState) -> f64 {
         state
             .shape
             .iter()
-            .zip(self.sigma_mm)
-            .map(|(w, s)| 0.5 * self.weight * (w / s.max(1e-9)).powi(2))
+            .enumerate()
+            .map(|(k, w)| 0.5 * self.precision(k) * w * w)
             .sum()
     }
 }
@@ -207,8 +212,8 @@ impl Prior for ShapePrior<'_> {
     }
 
     fn add_normal_equations(&self, state: &FitState, eq: &mut NormalEquations) {
-        for (k, s) in self.sigma_mm.iter().enumerate() {
-            let inv = self.weight / (s * s).max(1e-12);
+        for k in 0..self.sigma_mm.len() {
+            let inv = self.precision(k);
             let lam = self.damping;
             let w = state.shape[k];
             eq.h[(k, k)] += inv + lam;
@@ -216,11 +221,6 @@ impl Prior for ShapePrior<'_> {
         }
     }
 }
-
-/// Precision of each corrected intrinsic (fx, fy, cx, cy, k1) relative to its own curvature:
-/// k1 is held far harder, since zoom barely moves distortion (paper §IV-A) and a free k1
-/// mimics a focal change.
-pub const CAMERA_RELATIVE_DAMPING: [f64; 5] = [1.0, 1.0, 1.0, 1.0, 100.0];
 
 /// Tikhonov damping of the rig's intrinsics towards the previous frame's. The rig moves by one
 /// shared increment (`optimizer::shared_camera_increment`), so camera 0's change stands for
@@ -231,12 +231,12 @@ pub struct CameraDamping {
 }
 
 impl CameraDamping {
-    /// `weight` times [`CAMERA_RELATIVE_DAMPING`] times each parameter's curvature in `h`
-    /// (the rig's five shared parameters).
-    pub fn new(previous: &FitState, weight: f64, h: &DMatrix<f64>) -> Self {
+    /// `weight` times `relative[k]` times each parameter's curvature in `h` (the rig's five
+    /// shared parameters, fx, fy, cx, cy, k1).
+    pub fn new(previous: &FitState, weight: f64, relative: [f64; 5], h: &DMatrix<f64>) -> Self {
         Self {
             previous: previous.intrinsics[0].corrected(),
-            lambda: std::array::from_fn(|k| weight * CAMERA_RELATIVE_DAMPING[k] * h[(k, k)]),
+            lambda: std::array::from_fn(|k| weight * relative[k] * h[(k, k)]),
         }
     }
 
@@ -335,7 +335,7 @@ mod tests {
         let shape = ShapePrior::new(2.0, &sigma, &previous, 0.5, &h);
         check(&shape, &state, Block::Shape, 3, 1e-6);
         check(
-            &CameraDamping::new(&previous, 0.01, &h),
+            &CameraDamping::new(&previous, 0.01, [1.0, 1.0, 1.0, 1.0, 100.0], &h),
             &state,
             Block::Cameras(1),
             5,
@@ -353,7 +353,7 @@ mod tests {
         // And none of them has energy at the state it pulls towards.
         assert_eq!(affine.energy(&previous), 0.0);
         assert_eq!(
-            CameraDamping::new(&previous, 1.0, &h).energy(&previous),
+            CameraDamping::new(&previous, 1.0, [1.0; 5], &h).energy(&previous),
             0.0
         );
     }

@@ -359,10 +359,19 @@ impl<'a> FrameTracker<'a> {
         {
             return (fit, true);
         }
-        let Ok(affine) =
-            super::init::automatic_pose(self.scene, self.ctx.model, self.appearance, config, t)
-        else {
-            return (fit, true);
+        let affine = match super::init::automatic_pose(
+            self.scene,
+            self.ctx.model,
+            self.appearance,
+            config,
+            t,
+        ) {
+            Ok(affine) => affine,
+            Err(e) => {
+                // Expected while the organ is out of view; the frame stays lost.
+                log::debug!("frame {t}: no fresh placement: {e}");
+                return (fit, true);
+            }
         };
         let restart = FitState {
             affine,
@@ -412,7 +421,8 @@ pub fn track(
             .map(|c| scene.frame(c, t))
             .collect::<Result<_, _>>()?;
         let started = std::time::Instant::now();
-        let levels = options.fit_level() + 3;
+        // Levels 0 to the coarsest the first frame starts at.
+        let levels = options.fit_level() + options.config.first_frame.coarser_levels + 1;
         let mut views: Vec<ViewProbabilities> =
             super::profile::time(super::profile::Phase::Pyramid, || {
                 frames

@@ -38,6 +38,14 @@ pub struct EnergyParams {
     /// Variance (level px²) of a line whose best shift lies at the end of its search range:
     /// as loose as a σ = 2 px edge, where a clean edge's parabola gives σ ≈ 0.15–0.5 px.
     pub saturated_line_variance_px2: f64,
+    /// A softmin variance under this (level px²) is refined by a parabola through the best
+    /// shift and its neighbours: near the optimum the softmin collapses onto one integer
+    /// shift and loses the sub-pixel offset.
+    pub parabola_below_variance_px2: f64,
+    /// The parabola's variance (1 / curvature) is kept inside this range (level px²).
+    pub parabola_variance_px2: [f64; 2],
+    /// A softmin variance is at least this (level px²).
+    pub min_softmin_variance_px2: f64,
     /// A rim point gets a line when the visibility raster (one level coarser) shows its
     /// structure this far inside and something else this far outside (level pixels).
     pub rim_check_px: f64,
@@ -58,6 +66,9 @@ impl Default for EnergyParams {
             heaviside_px: 1.2,
             probability_floor: 0.02,
             saturated_line_variance_px2: 4.0,
+            parabola_below_variance_px2: 1.0,
+            parabola_variance_px2: [0.02, 4.0],
+            min_softmin_variance_px2: 0.25,
             rim_check_px: 3.0,
             rim_depth_tolerance: 0.08,
             line_cell_px: 2.0,

@@ -70,18 +70,19 @@ pub fn line_target(line: &Line, c: DVec2, ep: &EnergyParams) -> (f64, f64) {
     if k == 0 || k + 1 == profile.len() {
         return (k as f64 - r as f64, ep.saturated_line_variance_px2);
     }
-    if var < 1.0 {
+    if var < ep.parabola_below_variance_px2 {
+        let [lowest, highest] = ep.parabola_variance_px2;
         let (em, e0, ep) = (profile[k - 1], profile[k], profile[k + 1]);
         let curvature = em - 2.0 * e0 + ep;
         if curvature > 1e-9 {
             let offset = (0.5 * (em - ep) / curvature).clamp(-0.5, 0.5);
             return (
                 k as f64 - r as f64 + offset,
-                (1.0 / curvature).clamp(0.02, 4.0),
+                (1.0 / curvature).clamp(lowest, highest),
             );
         }
     }
-    (mean, var.max(0.25))
+    (mean, var.max(ep.min_softmin_variance_px2))
 }
 
 /// Mean p_f just inside minus just outside the fitted contours, over lines, clamped to [0, 1].

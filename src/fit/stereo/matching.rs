@@ -249,20 +249,13 @@ fn match_point(
     Some((other, params.sigma_px / s / px_per_mm))
 }
 
-/// Largest angle between camera 0's and a partner's viewing directions for patch matching,
-/// degrees. Square patches compare like with like only when the views look the same way (a
-/// stereo endoscope's two channels); views orbiting the organ see each patch foreshortened
-/// and turned, their matches were biased, and their long baselines made those matches weigh
-/// most (three views, 15° apart: LS Dice 0.965 → 0.909 with them).
-pub const MAX_PARTNER_ANGLE_DEG: f64 = 5.0;
-
 /// Whether `other` and `reference` form a stereo pair the term can match across: a baseline,
-/// and nearly parallel viewing directions.
-pub fn is_stereo_partner(reference: &Camera, other: &Camera) -> bool {
+/// and viewing directions at most `max_angle_deg` apart.
+pub fn is_stereo_partner(reference: &Camera, other: &Camera, max_angle_deg: f64) -> bool {
     let axis = |c: &Camera| c.extrinsics.rotation.transpose() * DVec3::Z;
     let cos = axis(reference).dot(axis(other));
     (other.extrinsics.center_mm() - reference.extrinsics.center_mm()).length() > 0.1
-        && cos >= MAX_PARTNER_ANGLE_DEG.to_radians().cos()
+        && cos >= max_angle_deg.to_radians().cos()
 }
 
 /// Finds stereo matches on the model's visible surface in camera 0 at `state`. Points lie on
@@ -369,7 +362,13 @@ pub fn measure(
         })
         .collect();
     let work: Vec<_> = (1..views.len())
-        .filter(|&m| is_stereo_partner(&ctx.cameras[0], &ctx.cameras[m]))
+        .filter(|&m| {
+            is_stereo_partner(
+                &ctx.cameras[0],
+                &ctx.cameras[m],
+                params.max_partner_angle_deg,
+            )
+        })
         .flat_map(|m| candidates.iter().map(move |c| (m, c)))
         .collect();
     let matches = work

@@ -22,10 +22,7 @@
 pub mod matching;
 pub mod term;
 
-pub use matching::{
-    MAX_PARTNER_ANGLE_DEG, StereoMatch, StereoPoint, StereoSet, is_stereo_partner, measure,
-    triangulate,
-};
+pub use matching::{StereoMatch, StereoPoint, StereoSet, is_stereo_partner, measure, triangulate};
 pub use term::StereoTerm;
 
 /// Settings of the stereo depth term.
@@ -50,6 +47,12 @@ pub struct StereoParams {
     pub sigma_px: f64,
     /// Huber threshold on the normalised residual.
     pub huber: f64,
+    /// Largest angle between camera 0's and a partner's viewing directions for patch
+    /// matching, degrees. Square patches compare like with like only when the views look the
+    /// same way (a stereo endoscope's two channels); views orbiting the organ see each patch
+    /// foreshortened and turned, their matches were biased, and their long baselines made
+    /// those matches weigh most (three views, 15° apart: LS Dice 0.965 → 0.909 with them).
+    pub max_partner_angle_deg: f64,
 }
 
 impl Default for StereoParams {
@@ -62,6 +65,7 @@ impl Default for StereoParams {
             min_ncc: 0.85,
             sigma_px: 0.3,
             huber: 2.0,
+            max_partner_angle_deg: 5.0,
         }
     }
 }
