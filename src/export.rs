@@ -85,9 +85,11 @@ pub fn export_results(
     mode: Mode,
     dir: &Path,
     forest_train_s: f64,
+    config: Option<crate::fit::config::ResolvedConfig>,
 ) -> Result<crate::track::TrackMetrics, Error> {
     let mut recorder = crate::track::Recorder::new(scene, dir, mode);
     recorder.overlays = true;
+    recorder.config = config;
     for r in results {
         let rendered = crate::fit::tracker::render_state(scene, model, &r.state);
         recorder.record(&TrackedFrame {
@@ -115,10 +117,16 @@ pub struct ExportJob {
     pub mode: Mode,
     pub dir: PathBuf,
     pub forest_train_s: f64,
+    /// The configuration the frames were fitted with (recorded in metrics.json).
+    pub config: crate::fit::FitConfig,
 }
 
 impl ExportJob {
     pub fn run(&self) -> Result<crate::track::TrackMetrics, Error> {
+        let fit_level = self
+            .config
+            .tracking
+            .fit_level(self.scene.cameras.first().map_or(0, |c| c.width));
         export_results(
             &self.scene,
             &self.model,
@@ -126,6 +134,7 @@ impl ExportJob {
             self.mode,
             &self.dir,
             self.forest_train_s,
+            Some(self.config.resolved(self.mode, fit_level)),
         )
     }
 }

@@ -67,6 +67,9 @@ pub struct TrackMetrics {
     /// (`track --config metrics.json`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub config: Option<ResolvedConfig>,
+    /// The forest's settings (trained on the scene's seeds).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub forest: Option<ForestParams>,
 }
 
 fn mean(v: &[f64]) -> f64 {
@@ -97,7 +100,8 @@ pub fn run(
     cancel: Option<&AtomicBool>,
     progress: &dyn Fn(usize, usize),
 ) -> Result<TrackMetrics, Error> {
-    let appearance = Appearance::train(scene, &ForestParams::default(), cancel)?;
+    let forest = ForestParams::default();
+    let appearance = Appearance::train(scene, &forest, cancel)?;
     let model = Model::build(scene)?;
     let affine = match scene.initial_pose {
         Some(a) => a,
@@ -109,6 +113,7 @@ pub fn run(
     let total = frames.1 + 1 - frames.0;
     let mut recorder = Recorder::new(scene, out, mode);
     recorder.config = Some(options.config.resolved(mode, options.fit_level()));
+    recorder.forest = Some(forest);
     track(
         scene,
         &model,
@@ -166,6 +171,8 @@ pub struct Recorder<'a> {
     pub overlays: bool,
     /// The configuration the frames were fitted with, for metrics.json.
     pub config: Option<ResolvedConfig>,
+    /// The forest's settings, for metrics.json.
+    pub forest: Option<ForestParams>,
 }
 
 impl<'a> Recorder<'a> {
@@ -188,6 +195,7 @@ impl<'a> Recorder<'a> {
             lost_frames: 0,
             overlays: false,
             config: None,
+            forest: None,
         }
     }
 
@@ -345,6 +353,7 @@ impl<'a> Recorder<'a> {
                 },
             },
             config: self.config,
+            forest: self.forest,
         };
         write_json_atomic(&self.out.join("metrics.json"), &metrics)?;
         Ok(metrics)

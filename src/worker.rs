@@ -42,7 +42,7 @@ pub enum Command {
         start: Option<Affine>,
     },
     /// Write tracked frames as `endofuse track` does (File → Export).
-    Export(crate::export::ExportJob),
+    Export(Box<crate::export::ExportJob>),
     Shutdown,
 }
 

@@ -324,6 +324,10 @@ fn a_run_is_reproduced_from_its_metrics_and_its_config_is_honoured() {
     assert_eq!(config["fit"]["priors"]["shape"], 2.0);
     assert_eq!(config["resolved"]["tracked_frame"]["priors"]["shape"], 8.0);
     assert!(config["resolved"]["first_frame"]["levels"].is_array());
+    assert_eq!(
+        metrics["forest"]["trees"], 20,
+        "the forest's settings are recorded too"
+    );
     let metrics_path = first.join("metrics.json");
     let mut with_config = args.to_vec();
     with_config.extend(["--config", metrics_path.to_str().unwrap()]);

@@ -123,6 +123,12 @@ impl EndofuseApp {
                 radius_px,
                 dab,
             } => {
+                // The editor's stroke may have ended under the drag (an undo, a scene or a
+                // session arriving): the rest of the drag is one stroke again, not a step per
+                // dab.
+                if !self.doc.editor.in_stroke() {
+                    self.doc.editor.begin_stroke();
+                }
                 self.doc
                     .editor
                     .line(camera, frame, from, to, radius_px, dab);

@@ -4,6 +4,7 @@
 //! reading themselves are the core's (`session`, `export`); every failure is shown once.
 
 use super::EndofuseApp;
+use super::commands::AppCommand;
 use super::jobs::{PendingSession, camera_sizes};
 use crate::error::Error;
 use crate::session::{self, SESSION_FORMAT, Session};
@@ -74,9 +75,18 @@ pub struct Files {
     pub autosave_offer: Option<PathBuf>,
     last_autosave_s: f64,
     /// Autosaves report back from their thread: a failure is shown once, until one succeeds.
-    autosaved_tx: Sender<Result<(), Error>>,
-    autosaved_rx: Receiver<Result<(), Error>>,
+    autosaved_tx: Sender<Autosaved>,
+    autosaved_rx: Receiver<Autosaved>,
     autosave_failing: bool,
+    /// Counts saves under a name: an autosave begun before the last one is stale.
+    generation: u64,
+}
+
+/// How one autosave went.
+struct Autosaved {
+    generation: u64,
+    path: PathBuf,
+    result: Result<(), Error>,
 }
 
 impl Files {
@@ -90,6 +100,7 @@ impl Files {
             autosaved_tx,
             autosaved_rx,
             autosave_failing: false,
+            generation: 0,
         }
     }
 
@@ -170,6 +181,7 @@ impl EndofuseApp {
             .map(|r| (r.frame, r))
             .collect();
         self.screen.textures = Default::default();
+        self.screen.stroke = Default::default();
         self.status.notice = Some(format!("Session {} restored.", path.display()));
     }
 
@@ -199,9 +211,11 @@ impl EndofuseApp {
             Ok(()) => {
                 self.doc.saved = self.doc.revision();
                 self.status.notice = Some(format!("Saved {}", path.display()));
-                // Saved under a name: the autosave is no longer needed.
+                // Saved under a name: the autosave is no longer needed, nor any still being
+                // written (it would offer to restore what was just saved).
+                self.files.generation += 1;
                 if let Err(e) = remove_if_present(&self.files.autosave_path(&self.doc.spec)) {
-                    log::warn!("{e}");
+                    self.status.fail(e);
                 }
             }
             Err(e) => self.status.fail(e),
@@ -211,8 +225,14 @@ impl EndofuseApp {
     /// Writes the autosave every few seconds when something changed, on a helper thread; a
     /// failed autosave is shown once (until one succeeds again).
     pub(super) fn autosave(&mut self, now_s: f64) {
-        for result in self.files.autosaved_rx.try_iter().collect::<Vec<_>>() {
-            match result {
+        for done in self.files.autosaved_rx.try_iter().collect::<Vec<_>>() {
+            match done.result {
+                // Written after the session was saved under a name: not wanted.
+                Ok(()) if done.generation != self.files.generation => {
+                    if let Err(e) = remove_if_present(&done.path) {
+                        self.status.fail(e);
+                    }
+                }
                 Ok(()) => self.files.autosave_failing = false,
                 Err(e) => {
                     if !self.files.autosave_failing {
@@ -235,10 +255,15 @@ impl EndofuseApp {
         self.doc.autosaved = state;
         let session = self.doc.session();
         let path = self.files.autosave_path(&self.doc.spec);
-        let done = self.files.autosaved_tx.clone();
+        let (done, generation) = (self.files.autosaved_tx.clone(), self.files.generation);
         std::thread::spawn(move || {
+            let result = session.save(&path);
             // The app may be closing: then nobody needs to hear how it went.
-            let _ = done.send(session.save(&path));
+            let _ = done.send(Autosaved {
+                generation,
+                path,
+                result,
+            });
         });
     }
 
@@ -282,11 +307,11 @@ impl EndofuseApp {
                 && std::fs::read_to_string(p)
                     .ok()
                     .is_some_and(|t| t.contains(SESSION_FORMAT));
-            if is_session {
-                self.load_session_file(p);
+            self.send(if is_session {
+                AppCommand::LoadSession(p.clone())
             } else {
-                self.open_scene(&p.display().to_string());
-            }
+                AppCommand::OpenScene(p.display().to_string())
+            });
         }
     }
 }

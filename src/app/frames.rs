@@ -90,6 +90,11 @@ impl FrameLoader {
         }
     }
 
+    /// Whether the decoding thread runs (it may fail to start).
+    pub fn running(&self) -> bool {
+        self.thread.is_some()
+    }
+
     /// Asks for frame `frame` of `camera` (replacing an older request for that camera).
     pub fn request(&self, scene: &Arc<Scene>, camera: usize, frame: usize) {
         let (lock, cv) = &*self.shared;

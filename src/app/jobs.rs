@@ -35,6 +35,8 @@ pub struct Jobs {
     probability_asked: Option<usize>,
     /// Strokes changed at this time (s) and a live retrain is due.
     retrain_due_s: Option<f64>,
+    /// The fit's configuration the worker tracks with (recorded in exports).
+    pub config: crate::fit::FitConfig,
 }
 
 /// (width, height) of every camera of a scene.
@@ -96,6 +98,7 @@ impl EndofuseApp {
         doc.placement = scene.initial_pose;
         doc.results.clear();
         self.screen.textures = Default::default();
+        self.screen.stroke = Default::default();
         let spec = doc.spec.clone();
         self.prefs.recent.retain(|r| r != &spec);
         if spec != crate::open::DEMO {
@@ -109,7 +112,8 @@ impl EndofuseApp {
         }
     }
 
-    /// Tells the worker about freshly loaded seeds or a forest from a session.
+    /// Marks seeds loaded from a session as changed: they reach the worker before the next
+    /// training, and count as unsaved until saved again under a session name.
     pub(super) fn seeds_loaded(&mut self) {
         // Loaded strokes count as a change until saved again under a session name.
         self.doc.editor.revision = self.jobs.seeds_sent + 1;
@@ -249,14 +253,15 @@ impl EndofuseApp {
         self.status
             .busy_with(Task::Export, format!("Exporting to {}…", dir.display()), 0);
         self.jobs.exporting = Some(dir.clone());
-        self.send_job(Command::Export(crate::export::ExportJob {
+        self.send_job(Command::Export(Box::new(crate::export::ExportJob {
             scene,
             model,
             results: self.doc.results.values().cloned().collect(),
             mode: self.doc.mode(),
             dir,
             forest_train_s,
-        }));
+            config: self.jobs.config.clone(),
+        })));
     }
 
     fn handle_event(&mut self, e: Event, ctx: &egui::Context) {

@@ -85,6 +85,10 @@ impl EndofuseApp {
             confirm_close: false,
             allow_close: false,
         };
+        if !app.screen.loader.running() {
+            app.status
+                .fail("cannot start the thread that decodes frames: the views will stay empty");
+        }
         app.open_scene(scene);
         app
     }
@@ -113,12 +117,12 @@ impl EndofuseApp {
                 ctx.input_mut(|i| i.consume_shortcut(&s));
                 if released {
                     if !self.screen.stroke.panned_with_key {
-                        self.do_action(a, ctx);
+                        self.send(AppCommand::Action(a));
                     }
                     self.screen.stroke.panned_with_key = false;
                 }
             } else if ctx.input_mut(|i| i.consume_shortcut(&s)) {
-                self.do_action(a, ctx);
+                self.send(AppCommand::Action(a));
             }
         }
     }

@@ -68,7 +68,10 @@ fn side_contents(shown: &Shown, ui: &mut egui::Ui) {
                 let pick = Action::PickClass(k as u8);
                 if ui
                     .selectable_label(view.class == k && view.tool == Tool::Brush, text)
-                    .on_hover_text(format!("Paint {label} ({})", pick.hint(&ctx)))
+                    .on_hover_text(match pick.shortcut() {
+                        Some(s) => format!("Paint {label} ({})", ctx.format_shortcut(&s)),
+                        None => format!("Paint {label}"),
+                    })
                     .clicked()
                 {
                     shown.commands.act(pick);

@@ -94,6 +94,10 @@ pub fn views(shown: &Shown, screen: &mut Screen, ui: &mut egui::Ui) {
     let rects = grid(ui.available_rect_before_wrap(), cams, 6.0);
     screen.layout.views = rects.clone();
     let pan_key = pan_key_down(&ctx);
+    if !pan_key {
+        // Also where the key's release went unseen (a text field had the keyboard).
+        screen.stroke.panned_with_key = false;
+    }
     for (c, &rect) in rects.iter().enumerate() {
         let cam_size = vec2(
             scene.cameras[c].width as f32,
