@@ -127,6 +127,13 @@ impl ExportJob {
             .config
             .tracking
             .fit_level(self.scene.cameras.first().map_or(0, |c| c.width));
+        let mut resolved = self.config.resolved(self.mode, fit_level);
+        // The frames form one range when the tracked ones are consecutive.
+        if let (Some(first), Some(last)) = (self.results.first(), self.results.last())
+            && last.frame + 1 - first.frame == self.results.len()
+        {
+            resolved.frames = Some([first.frame, last.frame]);
+        }
         export_results(
             &self.scene,
             &self.model,
@@ -134,7 +141,7 @@ impl ExportJob {
             self.mode,
             &self.dir,
             self.forest_train_s,
-            Some(self.config.resolved(self.mode, fit_level)),
+            Some(resolved),
         )
     }
 }

@@ -4,6 +4,7 @@
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 use endofuse::Error;
+use endofuse::fit::config::RecordedRun;
 use endofuse::fit::{FitConfig, Model};
 use endofuse::synth::SynthOptions;
 use std::path::PathBuf;
@@ -49,13 +50,15 @@ enum Command {
         #[arg(long)]
         out: PathBuf,
         /// R (rigid), L (affine), LS (affine + shape), LSC (+ camera intrinsics under zoom).
-        #[arg(long, default_value = "LS")]
-        mode: String,
+        /// Default: the mode a --config metrics.json recorded, else LS.
+        #[arg(long)]
+        mode: Option<String>,
         /// Inclusive 0-based frame range, e.g. 0..29 (default: all frames).
         #[arg(long)]
         frames: Option<String>,
         /// The fit's tuning constants: a JSON FitConfig (missing keys take their defaults) or
-        /// the metrics.json of an earlier run (its `config.fit`), to reproduce it.
+        /// the metrics.json of an earlier run, whose configuration, mode and frames it reuses
+        /// unless --mode or --frames say otherwise.
         #[arg(long)]
         config: Option<PathBuf>,
     },
@@ -173,15 +176,30 @@ fn run(cli: Cli) -> Result<()> {
             frames,
             config,
         }) => {
-            let config = match config {
+            let recorded = match config {
                 Some(path) => read_fit_config(&path)?,
-                None => FitConfig::default(),
+                None => RecordedRun {
+                    config: FitConfig::default(),
+                    mode: None,
+                    frames: None,
+                },
             };
-            let mode = endofuse::fit::Mode::parse(&mode).ok_or_else(|| {
-                endofuse::InputError::new("--mode", format!("'{mode}' is not one of R, L, LS, LSC"))
-            })?;
+            let mode = match mode {
+                Some(m) => endofuse::fit::Mode::parse(&m).ok_or_else(|| {
+                    endofuse::InputError::new(
+                        "--mode",
+                        format!("'{m}' is not one of R, L, LS, LSC"),
+                    )
+                })?,
+                None => recorded.mode.unwrap_or(endofuse::fit::Mode::LS),
+            };
+            let config = recorded.config;
             let scene = endofuse::open::scene(&scene)?;
-            let range = frame_range(frames.as_deref(), scene.frame_count)?;
+            let recorded_frames = recorded.frames.map(|(a, b)| format!("{a}..{b}"));
+            let range = frame_range(
+                frames.as_deref().or(recorded_frames.as_deref()),
+                scene.frame_count,
+            )?;
             let m =
                 endofuse::track::run(&scene, &out, mode, range, &config, None, &progress("track"))?;
             if let Some(r) = endofuse::fit::profile::report(m.frames) {
@@ -260,15 +278,14 @@ fn run(cli: Cli) -> Result<()> {
 }
 
 /// Reads `track --config FILE`.
-fn read_fit_config(path: &std::path::Path) -> Result<FitConfig> {
+fn read_fit_config(path: &std::path::Path) -> Result<RecordedRun> {
     let bad = |problem: String| endofuse::InputError::new(path, problem);
     let text = std::fs::read_to_string(path).map_err(|e| bad(format!("cannot read: {e}")))?;
-    let config = FitConfig::from_json(&text)
-        .map_err(|e| bad(format!("malformed fit configuration: {e}")))?;
-    config
+    let run = RecordedRun::from_json(&text).map_err(|e| bad(e.to_string()))?;
+    run.config
         .validate()
         .map_err(|e| bad(format!("fit configuration: {e}")))?;
-    Ok(config)
+    Ok(run)
 }
 
 /// Opens the desktop app (blocks until its window closes).
@@ -292,9 +309,19 @@ fn progress(what: &'static str) -> impl Fn(usize, usize) + Sync {
 }
 
 /// A progress line on stderr, `what: frame done/total`, rewritten in place every `every`
-/// frames and at the last.
+/// frames and at the last. Where stderr is not a terminal (a log file), one line per tenth of
+/// the work instead.
 fn progress_every(what: &'static str, every: usize) -> impl Fn(usize, usize) + Sync {
+    use std::io::IsTerminal;
+    let terminal = std::io::stderr().is_terminal();
     move |done, total| {
+        if !terminal {
+            let tenth = total.div_ceil(10).max(1);
+            if done.is_multiple_of(tenth) || done == total {
+                eprintln!("{what}: frame {done}/{total}");
+            }
+            return;
+        }
         if done.is_multiple_of(every) || done == total {
             eprint!("\r{what}: frame {done}/{total}");
         }

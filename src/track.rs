@@ -102,6 +102,13 @@ pub fn run(
 ) -> Result<TrackMetrics, Error> {
     let forest = ForestParams::default();
     let appearance = Appearance::train(scene, &forest, cancel)?;
+    log::info!(
+        "forest: {} trees on {} seeded pixels in {:.2} s, out-of-bag error {:.3}",
+        forest.trees,
+        appearance.stats.samples,
+        appearance.stats.train_s,
+        appearance.stats.oob_error
+    );
     let model = Model::build(scene)?;
     let affine = match scene.initial_pose {
         Some(a) => a,
@@ -112,8 +119,17 @@ pub fn run(
         TrackOptions::new(mode, frames, scene.cameras[0].width).with_config(config.clone());
     let total = frames.1 + 1 - frames.0;
     let mut recorder = Recorder::new(scene, out, mode);
-    recorder.config = Some(options.config.resolved(mode, options.fit_level()));
+    let mut resolved = options.config.resolved(mode, options.fit_level());
+    resolved.frames = Some([frames.0, frames.1]);
+    recorder.config = Some(resolved);
     recorder.forest = Some(forest);
+    log::info!(
+        "tracking frames {}..{} in mode {} at pyramid level {}",
+        frames.0,
+        frames.1,
+        mode.name(),
+        options.fit_level()
+    );
     track(
         scene,
         &model,
@@ -122,6 +138,14 @@ pub fn run(
         &options,
         cancel,
         &mut |f| {
+            log::debug!(
+                "frame {}: confidence {:.3}, {} steps, {:.1} ms{}",
+                f.frame,
+                f.confidence,
+                f.iterations,
+                f.ms,
+                if f.lost { ", lost" } else { "" }
+            );
             recorder.record(&f)?;
             progress(recorder.frames(), total);
             Ok(())

@@ -316,11 +316,12 @@ fn tracking_overlay_picture() {
 fn a_run_is_reproduced_from_its_metrics_and_its_config_is_honoured() {
     let scene = synth("config", &[]);
     let (first, again, changed) = (tmp("config-1"), tmp("config-2"), tmp("config-3"));
-    let args = ["--mode", "LS", "--frames", "0..2"];
+    let args = ["--mode", "L", "--frames", "1..3"];
     track_ok(&scene, &first, &args);
     let metrics = json(&first.join("metrics.json"));
     let config = &metrics["config"];
-    assert_eq!(config["mode"], "LS");
+    assert_eq!(config["mode"], "L");
+    assert_eq!(config["frames"], serde_json::json!([1, 3]));
     assert_eq!(config["fit"]["priors"]["shape"], 2.0);
     assert_eq!(config["resolved"]["tracked_frame"]["priors"]["shape"], 8.0);
     assert!(config["resolved"]["first_frame"]["levels"].is_array());
@@ -328,10 +329,14 @@ fn a_run_is_reproduced_from_its_metrics_and_its_config_is_honoured() {
         metrics["forest"]["trees"], 20,
         "the forest's settings are recorded too"
     );
+    // The metrics alone: configuration, mode and frames as recorded.
     let metrics_path = first.join("metrics.json");
-    let mut with_config = args.to_vec();
-    with_config.extend(["--config", metrics_path.to_str().unwrap()]);
-    track_ok(&scene, &again, &with_config);
+    track_ok(
+        &scene,
+        &again,
+        &["--config", metrics_path.to_str().unwrap()],
+    );
+    assert_eq!(json(&again.join("metrics.json"))["mode"], "L");
     let frames = |dir: &Path| json(&dir.join("trajectory.json"))["frames"].clone();
     let strip_ms = |mut v: serde_json::Value| {
         for f in v.as_array_mut().unwrap() {
@@ -340,10 +345,10 @@ fn a_run_is_reproduced_from_its_metrics_and_its_config_is_honoured() {
         v
     };
     assert_eq!(strip_ms(frames(&first)), strip_ms(frames(&again)));
-    // A much stronger shape prior is a different fit.
+    // Tracked frames damped 50 times harder are a different fit.
     let stiff = changed.with_extension("json");
     std::fs::create_dir_all(stiff.parent().unwrap()).unwrap();
-    std::fs::write(&stiff, r#"{"tracked_frame": {"shape_prior": 5000.0}}"#).unwrap();
+    std::fs::write(&stiff, r#"{"priors": {"pose_damping": 50.0}}"#).unwrap();
     let mut stiff_args = args.to_vec();
     stiff_args.extend(["--config", stiff.to_str().unwrap()]);
     track_ok(&scene, &changed, &stiff_args);

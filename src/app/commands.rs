@@ -105,7 +105,12 @@ impl EndofuseApp {
             AppCommand::SetTrackRange(a, b) => self.view.track_range = (a.min(b), a.max(b)),
             AppCommand::SetOverwrite(o) => self.view.overwrite = o,
             AppCommand::SetPrefs(p) => self.prefs = p,
-            AppCommand::SetSettings(s) => self.doc.settings = s,
+            AppCommand::SetSettings(s) => {
+                if s != self.doc.settings {
+                    self.doc.settings = s;
+                    self.doc.touch();
+                }
+            }
             AppCommand::SetStyle(i, s) => {
                 if let Some(style) = self.view.styles.get_mut(i) {
                     *style = s;
@@ -141,6 +146,7 @@ impl EndofuseApp {
             AppCommand::Place(affine) => {
                 self.doc.placement = Some(affine);
                 self.doc.results.remove(&self.view.frame);
+                self.doc.touch();
                 self.screen.textures.forget_overlays();
             }
             AppCommand::DiscardAutosave => self.discard_autosave(),

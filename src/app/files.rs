@@ -182,6 +182,12 @@ impl EndofuseApp {
             .collect();
         self.screen.textures = Default::default();
         self.screen.stroke = Default::default();
+        self.doc.touch();
+        // A session file is saved work; an autosave restored is not, until it is saved.
+        let autosave = self.files.autosave_path(&self.doc.spec);
+        if path != autosave {
+            self.doc.saved = self.doc.revision();
+        }
         self.status.notice = Some(format!("Session {} restored.", path.display()));
     }
 

@@ -73,7 +73,7 @@ impl EndofuseApp {
         let doc = &mut self.doc;
         doc.editor = SeedEditor::new(&scene.seeds, camera_sizes(&scene));
         self.jobs.seeds_sent = doc.editor.revision;
-        doc.saved = (doc.editor.revision, 0);
+        doc.saved = doc.revision();
         doc.autosaved = doc.saved;
         doc.model = Some(model);
         let classes = ClassMap::from_scene(&scene);
@@ -122,6 +122,7 @@ impl EndofuseApp {
     pub(super) fn use_forest(&mut self, forest: Arc<crate::appearance::Appearance>) {
         self.send_job(Command::SetAppearance(forest.clone()));
         self.doc.appearance = Some(forest);
+        self.doc.touch();
     }
 
     /// Seeds for the worker, if they changed since it last had them.
@@ -278,6 +279,7 @@ impl EndofuseApp {
                     a.stats.oob_error * 100.0
                 ));
                 self.doc.appearance = Some(a);
+                self.doc.touch();
                 self.jobs.probabilities.clear();
                 self.jobs.probability_asked = None;
                 self.screen.textures.probability_key = None;
@@ -294,6 +296,7 @@ impl EndofuseApp {
             }
             Event::Initialised(a) => {
                 self.doc.placement = Some(a);
+                self.doc.touch();
                 self.status.notice =
                     Some("Model placed: check it, then Fit this frame (F) or Track.".into());
             }
@@ -319,10 +322,12 @@ impl EndofuseApp {
                     self.view.frame = f.frame;
                 }
                 self.doc.results.insert(f.frame, r);
+                self.doc.touch();
             }
             Event::Dice { frame, dice } => {
                 if let Some(r) = self.doc.results.get_mut(&frame) {
                     r.dice = dice;
+                    self.doc.touch();
                 }
             }
             Event::Finished(task) => self.task_ended(task, true),
@@ -340,8 +345,16 @@ impl EndofuseApp {
 
     /// Bookkeeping when the worker ends `task`, however it ended (`finished`: it completed).
     fn task_ended(&mut self, task: Task, finished: bool) {
-        if self.status.busy.as_ref().is_some_and(|b| b.task == task) {
-            self.status.busy = None;
+        if let Some(busy) = self.status.busy.take_if(|b| b.task == task)
+            && finished
+            && task == Task::Track
+        {
+            let lost = self.doc.results.values().filter(|r| r.lost).count();
+            self.status.notice = Some(format!(
+                "Fitted {} frame{} ({lost} of all fitted frames lost).",
+                busy.total,
+                if busy.total == 1 { "" } else { "s" }
+            ));
         }
         match task {
             Task::Classify => self.jobs.probability_asked = None,

@@ -101,12 +101,17 @@ impl EndofuseApp {
     /// Every action's shortcut, from the action table. A key that is also held for a drag
     /// (Space: pan) fires its action on release, unless the hold was used to drag.
     fn shortcuts(&mut self, ctx: &egui::Context) {
-        if ctx.egui_wants_keyboard_input() {
+        // A text field or the close question has the keyboard.
+        if ctx.egui_wants_keyboard_input() || self.confirm_close {
             return;
         }
         let held: Vec<egui::Key> = Action::ALL.iter().filter_map(|a| a.held_key()).collect();
         for a in Action::ALL {
             let Some(s) = a.shortcut() else { continue };
+            // With nothing to cancel, Esc is left to egui: it closes menus and popups.
+            if a == Action::Cancel && self.status.busy.is_none() && !self.view.playing {
+                continue;
+            }
             if s.modifiers == egui::Modifiers::NONE && held.contains(&s.logical_key) {
                 let released = ctx.input(|i| {
                     i.events.iter().any(|e| {
@@ -134,6 +139,10 @@ impl EndofuseApp {
             self.confirm_close = true;
         }
         if !self.confirm_close {
+            return;
+        }
+        if ctx.input_mut(|i| i.consume_key(egui::Modifiers::NONE, egui::Key::Escape)) {
+            self.confirm_close = false;
             return;
         }
         egui::Modal::new(egui::Id::unique("confirm-close")).show(ctx, |ui| {

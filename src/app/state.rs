@@ -106,20 +106,28 @@ pub struct Document {
     /// The pose the model was placed at (the scene's, automatic, or by hand).
     pub placement: Option<Affine>,
     pub results: BTreeMap<usize, FrameResult>,
-    /// (seed revision, results count) at the last save, and at the last autosave.
-    pub saved: (u64, usize),
-    pub autosaved: (u64, usize),
+    /// Counts changes to what a session keeps besides the strokes: fits, the placement, the
+    /// settings, the forest.
+    pub edits: u64,
+    /// [`Document::revision`] at the last save, and at the last autosave.
+    pub saved: (u64, u64),
+    pub autosaved: (u64, u64),
 }
 
 impl Document {
-    /// True when strokes or results changed since the last save.
+    /// True when anything a session keeps changed since the last save.
     pub fn unsaved(&self) -> bool {
         self.scene.is_some() && self.revision() != self.saved
     }
 
-    /// What the save markers compare: the strokes' revision and the number of fitted frames.
-    pub fn revision(&self) -> (u64, usize) {
-        (self.editor.revision, self.results.len())
+    /// What the save markers compare: the strokes' revision and the count of other edits.
+    pub fn revision(&self) -> (u64, u64) {
+        (self.editor.revision, self.edits)
+    }
+
+    /// Something a session keeps, other than the strokes, changed.
+    pub fn touch(&mut self) {
+        self.edits += 1;
     }
 
     pub fn session(&self) -> Session {

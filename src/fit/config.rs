@@ -505,6 +505,9 @@ impl FitConfig {
 #[derive(Debug, Clone, Serialize)]
 pub struct ResolvedConfig {
     pub mode: Mode,
+    /// The inclusive frame range the run fitted, where it was one range.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub frames: Option<[usize; 2]>,
     pub fit_level: usize,
     pub fit: FitConfig,
     pub resolved: std::collections::BTreeMap<&'static str, FitParams>,
@@ -531,6 +534,7 @@ impl FitConfig {
         .collect();
         ResolvedConfig {
             mode,
+            frames: None,
             fit_level,
             fit: self.clone(),
             resolved,
@@ -539,15 +543,60 @@ impl FitConfig {
 
     /// Reads a configuration from JSON text: a bare [`FitConfig`] (missing keys take their
     /// defaults), or a metrics.json `track` wrote, whose `config.fit` it takes.
-    pub fn from_json(text: &str) -> Result<FitConfig, serde_json::Error> {
+    pub fn from_json(text: &str) -> Result<FitConfig, ConfigFileError> {
+        Ok(RecordedRun::from_json(text)?.config)
+    }
+}
+
+/// Why a configuration file cannot be read.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigFileError {
+    #[error("malformed fit configuration: {0}")]
+    Json(#[from] serde_json::Error),
+    #[error(
+        "this metrics.json records no fit configuration (it was written before runs recorded one)"
+    )]
+    NoConfig,
+}
+
+/// What `track --config` reads: a configuration, and where the file is a run's metrics.json,
+/// the mode and frames that run used.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RecordedRun {
+    pub config: FitConfig,
+    pub mode: Option<Mode>,
+    pub frames: Option<(usize, usize)>,
+}
+
+impl RecordedRun {
+    pub fn from_json(text: &str) -> Result<RecordedRun, ConfigFileError> {
         let text = text.strip_prefix('\u{feff}').unwrap_or(text);
         let value: serde_json::Value = serde_json::from_str(text)?;
-        let fit = value
-            .get("config")
-            .and_then(|c| c.get("fit"))
-            .cloned()
-            .unwrap_or(value);
-        serde_json::from_value(fit)
+        // A metrics file: it has timing; its configuration, if any, sits under config.
+        let Some(recorded) = value.get("config") else {
+            if value.get("timing").is_some() {
+                return Err(ConfigFileError::NoConfig);
+            }
+            return Ok(RecordedRun {
+                config: serde_json::from_value(value)?,
+                mode: None,
+                frames: None,
+            });
+        };
+        let fit = recorded.get("fit").ok_or(ConfigFileError::NoConfig)?;
+        let mode = recorded
+            .get("mode")
+            .map(|m| serde_json::from_value::<Mode>(m.clone()))
+            .transpose()?;
+        let frames = recorded
+            .get("frames")
+            .map(|f| serde_json::from_value::<[usize; 2]>(f.clone()))
+            .transpose()?;
+        Ok(RecordedRun {
+            config: serde_json::from_value(fit.clone())?,
+            mode,
+            frames: frames.map(|[a, b]| (a, b)),
+        })
     }
 }
 
@@ -949,8 +998,24 @@ mod tests {
             let key = bad.split('"').nth(3).unwrap();
             assert!(err.field.ends_with(key), "{bad}: {err}");
         }
-        // What metrics.json holds reads back as the same configuration.
-        let metrics = serde_json::json!({ "mode": "LS", "config": c.resolved(Mode::LS, 1) });
-        assert_eq!(FitConfig::from_json(&metrics.to_string()).unwrap(), c);
+        // What metrics.json holds reads back as the same configuration, mode and frames.
+        let mut resolved = c.resolved(Mode::LSC, 1);
+        resolved.frames = Some([3, 9]);
+        let metrics = serde_json::json!({ "mode": "LSC", "timing": {}, "config": resolved });
+        let run = RecordedRun::from_json(&metrics.to_string()).unwrap();
+        assert_eq!(
+            run,
+            RecordedRun {
+                config: c.clone(),
+                mode: Some(Mode::LSC),
+                frames: Some((3, 9)),
+            }
+        );
+        // A metrics file without one says so.
+        let old = serde_json::json!({ "mode": "LS", "timing": {}, "camera": {} });
+        assert!(matches!(
+            RecordedRun::from_json(&old.to_string()),
+            Err(ConfigFileError::NoConfig)
+        ));
     }
 }
