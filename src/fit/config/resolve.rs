@@ -1,0 +1,209 @@
+//! Resolving a [`FitConfig`] into the settings of one fit ([`FitParams`]) for a mode and a
+//! phase, recording what a run resolved to ([`ResolvedConfig`], in metrics.json), and reading a
+//! configuration back ([`RecordedRun`]).
+
+use super::{FitConfig, Mode, Phase, Zoom};
+use super::{PriorConfig, SolverConfig};
+use crate::fit::lines::EnergyParams;
+use crate::fit::stereo::StereoParams;
+use serde::Serialize;
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+
+/// The settings of one fit, resolved from a [`FitConfig`] for a mode and phase.
+#[derive(Debug, Clone, Serialize)]
+pub struct FitParams {
+    pub mode: Mode,
+    /// Whether the π block runs (LSC inside a zoom change).
+    pub correct_cameras: bool,
+    /// Pyramid levels visited, coarse to fine.
+    pub levels: Vec<usize>,
+    /// T → W → π rounds per level.
+    pub rounds: usize,
+    /// Gauss–Newton steps per block and round.
+    pub steps: usize,
+    /// Gauss–Newton steps taken on one set of lines before they are rebuilt.
+    pub rebuild_every: usize,
+    pub solver: SolverConfig,
+    /// The line energy (its `level` is set per pyramid level).
+    pub energy: EnergyParams,
+    pub priors: PriorConfig,
+    /// The stereo depth term (matched once per pyramid level).
+    pub stereo: StereoParams,
+    /// Raised by whoever wants the fit to stop: checked between Gauss–Newton steps, so a
+    /// cancel is answered within one step (a few ms), not one frame.
+    #[serde(skip)]
+    pub cancel: Option<Arc<AtomicBool>>,
+}
+
+impl FitParams {
+    /// The line energy's settings at pyramid `level`.
+    pub fn energy_at(&self, level: usize) -> EnergyParams {
+        EnergyParams {
+            level,
+            ..self.energy
+        }
+    }
+}
+
+impl FitConfig {
+    /// The settings of one fit in `mode` and `phase`, at tracking level `fit_level` (see
+    /// [`TrackingConfig::fit_level`]), inside a zoom or not. Pure: the same inputs give the
+    /// same settings.
+    pub fn resolve(&self, mode: Mode, phase: Phase, zoom: Zoom, fit_level: usize) -> FitParams {
+        let mut p = FitParams {
+            mode,
+            correct_cameras: false,
+            levels: Vec::new(),
+            rounds: 0,
+            steps: 0,
+            rebuild_every: 0,
+            solver: self.solver,
+            energy: self.energy,
+            priors: self.priors,
+            stereo: self.stereo,
+            cancel: None,
+        };
+        match phase {
+            Phase::FirstFrame => {
+                let f = &self.first_frame;
+                p.levels = (0..=f.coarser_levels)
+                    .rev()
+                    .map(|k| fit_level + k)
+                    .collect();
+                (p.rounds, p.steps, p.rebuild_every) = (f.rounds, f.steps, f.rebuild_every);
+                p.priors.pose_damping = f.pose_damping;
+                p.stereo.search_px = f.stereo_search_px;
+            }
+            Phase::Tracked => {
+                let f = &self.tracked_frame;
+                p.levels = vec![fit_level];
+                (p.rounds, p.steps, p.rebuild_every) = (f.rounds, f.steps, f.rebuild_every);
+                p.priors.shape = f.shape_prior;
+            }
+            Phase::Placement => {
+                let f = &self.placement;
+                p.mode = Mode::R;
+                p.levels = f.levels.clone();
+                (p.rounds, p.steps, p.rebuild_every) = (f.rounds, f.steps, f.rebuild_every);
+                p.priors.pose_damping = f.pose_damping;
+            }
+        }
+        let z = &self.zoom;
+        match zoom {
+            Zoom::Off => {}
+            Zoom::PoseOnly => p.priors.pose_damping *= z.pose_only_damping_factor,
+            Zoom::Cameras if p.mode == Mode::LSC => {
+                p.correct_cameras = true;
+                p.priors.pose_damping *= z.cameras_pose_damping_factor;
+                p.priors.shape_damping = p.priors.shape_damping.max(z.cameras_shape_damping);
+                p.rounds = p.rounds.max(z.cameras_min_rounds);
+                p.rebuild_every = p.rebuild_every.min(z.cameras_rebuild_every);
+                p.priors.camera_damping *= z.camera_damping_factor;
+            }
+            // Only LSC corrects cameras.
+            Zoom::Cameras => {}
+        }
+        p
+    }
+}
+
+/// What a run used: the configuration, the tracking level, and what it resolved to in every
+/// phase of the run's mode (written into `track`'s metrics.json).
+#[derive(Debug, Clone, Serialize)]
+pub struct ResolvedConfig {
+    pub mode: Mode,
+    /// The inclusive frame range the run fitted, where it was one range.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub frames: Option<[usize; 2]>,
+    pub fit_level: usize,
+    pub fit: FitConfig,
+    pub resolved: std::collections::BTreeMap<&'static str, FitParams>,
+}
+
+impl FitConfig {
+    /// This configuration with the settings of every phase of `mode` at tracking level
+    /// `fit_level`.
+    pub fn resolved(&self, mode: Mode, fit_level: usize) -> ResolvedConfig {
+        let zoom = if mode == Mode::LSC {
+            Zoom::Cameras
+        } else {
+            Zoom::PoseOnly
+        };
+        let resolved = [
+            ("first_frame", Phase::FirstFrame, Zoom::Off),
+            ("tracked_frame", Phase::Tracked, Zoom::Off),
+            ("first_frame_in_zoom", Phase::FirstFrame, zoom),
+            ("tracked_frame_in_zoom", Phase::Tracked, zoom),
+            ("placement", Phase::Placement, Zoom::Off),
+        ]
+        .into_iter()
+        .map(|(name, phase, zoom)| (name, self.resolve(mode, phase, zoom, fit_level)))
+        .collect();
+        ResolvedConfig {
+            mode,
+            frames: None,
+            fit_level,
+            fit: self.clone(),
+            resolved,
+        }
+    }
+
+    /// Reads a configuration from JSON text: a bare [`FitConfig`] (missing keys take their
+    /// defaults), or a metrics.json `track` wrote, whose `config.fit` it takes.
+    pub fn from_json(text: &str) -> Result<FitConfig, ConfigFileError> {
+        Ok(RecordedRun::from_json(text)?.config)
+    }
+}
+
+/// Why a configuration file cannot be read.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigFileError {
+    #[error("malformed fit configuration: {0}")]
+    Json(#[from] serde_json::Error),
+    #[error(
+        "this metrics.json records no fit configuration (it was written before runs recorded one)"
+    )]
+    NoConfig,
+}
+
+/// What `track --config` reads: a configuration, and where the file is a run's metrics.json,
+/// the mode and frames that run used.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RecordedRun {
+    pub config: FitConfig,
+    pub mode: Option<Mode>,
+    pub frames: Option<(usize, usize)>,
+}
+
+impl RecordedRun {
+    pub fn from_json(text: &str) -> Result<RecordedRun, ConfigFileError> {
+        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+        let value: serde_json::Value = serde_json::from_str(text)?;
+        // A metrics file: it has timing; its configuration, if any, sits under config.
+        let Some(recorded) = value.get("config") else {
+            if value.get("timing").is_some() {
+                return Err(ConfigFileError::NoConfig);
+            }
+            return Ok(RecordedRun {
+                config: serde_json::from_value(value)?,
+                mode: None,
+                frames: None,
+            });
+        };
+        let fit = recorded.get("fit").ok_or(ConfigFileError::NoConfig)?;
+        let mode = recorded
+            .get("mode")
+            .map(|m| serde_json::from_value::<Mode>(m.clone()))
+            .transpose()?;
+        let frames = recorded
+            .get("frames")
+            .map(|f| serde_json::from_value::<[usize; 2]>(f.clone()))
+            .transpose()?;
+        Ok(RecordedRun {
+            config: serde_json::from_value(fit.clone())?,
+            mode,
+            frames: frames.map(|[a, b]| (a, b)),
+        })
+    }
+}
