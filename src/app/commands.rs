@@ -22,8 +22,6 @@ pub enum AppCommand {
     LoadSession(std::path::PathBuf),
     /// Show frame `t` (the user scrubbed: stop following the tracker).
     SetFrame(usize),
-    SetPlaying(bool),
-    SetTool(Tool),
     SetLayer(Layer),
     SetTrackRange(usize, usize),
     SetOverwrite(bool),
@@ -49,7 +47,6 @@ pub enum AppCommand {
     Place(Affine),
     DiscardAutosave,
     DismissError,
-    DismissNotice,
 }
 
 /// Commands sent during a frame, applied after it.
@@ -99,8 +96,6 @@ impl EndofuseApp {
                 self.set_frame(t);
                 self.view.playing = false;
             }
-            AppCommand::SetPlaying(p) => self.view.playing = p,
-            AppCommand::SetTool(t) => self.view.tool = t,
             AppCommand::SetLayer(l) => self.view.layer = l,
             AppCommand::SetTrackRange(a, b) => self.view.track_range = (a.min(b), a.max(b)),
             AppCommand::SetOverwrite(o) => self.view.overwrite = o,
@@ -151,7 +146,6 @@ impl EndofuseApp {
             }
             AppCommand::DiscardAutosave => self.discard_autosave(),
             AppCommand::DismissError => self.status.error = None,
-            AppCommand::DismissNotice => self.status.notice = None,
         }
     }
 

@@ -148,12 +148,6 @@ impl FitConfig {
             resolved,
         }
     }
-
-    /// Reads a configuration from JSON text: a bare [`FitConfig`] (missing keys take their
-    /// defaults), or a metrics.json `track` wrote, whose `config.fit` it takes.
-    pub fn from_json(text: &str) -> Result<FitConfig, ConfigFileError> {
-        Ok(RecordedRun::from_json(text)?.config)
-    }
 }
 
 /// Why a configuration file cannot be read.
