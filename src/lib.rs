@@ -5,7 +5,9 @@
 #[cfg(feature = "gui")]
 pub mod app;
 pub mod appearance;
+pub mod calib;
 pub mod classify;
+pub mod ctimport;
 pub mod error;
 pub mod export;
 pub mod fit;
@@ -23,6 +25,7 @@ pub mod shape;
 pub mod strokes;
 pub mod synth;
 pub mod track;
+pub mod video;
 pub mod worker;
 
 pub use error::{Error, InputError, Result};

@@ -20,6 +20,100 @@ pub struct Intrinsics {
     pub k2: f64,
     pub p1: f64,
     pub p2: f64,
+    /// Third radial coefficient (OpenCV's k3, r⁶ term). Absent in older scenes and outputs
+    /// (read as 0, not written when 0).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub k3: f64,
+}
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
+}
+
+/// Intrinsics no real camera of the given image size has (a typo, a unit slip, a file of
+/// another tool's convention). Bounds are wide: a field of view between ~0.1° and ~178°, a
+/// principal point within one image size of the image, distortion of real lenses.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum IntrinsicsError {
+    #[error("intrinsics must be finite numbers")]
+    NonFinite,
+    #[error("focal lengths must be positive, got fx={fx_px} fy={fy_px}")]
+    NonPositiveFocal { fx_px: f64, fy_px: f64 },
+    #[error(
+        "focal length {focal_px:e} px is implausible for a {size_px} px wide image (expected {min_px:.0}–{max_px:.0} px)"
+    )]
+    FocalOutOfRange {
+        focal_px: f64,
+        size_px: u32,
+        min_px: f64,
+        max_px: f64,
+    },
+    #[error(
+        "principal point ({cx_px}, {cy_px}) px lies far outside the {width_px}×{height_px} image"
+    )]
+    PrincipalPoint {
+        cx_px: f64,
+        cy_px: f64,
+        width_px: u32,
+        height_px: u32,
+    },
+    #[error("distortion coefficient {name} = {value} is beyond any real lens (|{name}| ≤ {limit})")]
+    Distortion {
+        name: &'static str,
+        value: f64,
+        limit: f64,
+    },
+}
+
+impl Intrinsics {
+    /// Checks that these intrinsics can belong to a real camera of `width`×`height` pixels.
+    pub fn check_plausible(&self, width: u32, height: u32) -> Result<(), IntrinsicsError> {
+        let all = [
+            self.fx, self.fy, self.cx, self.cy, self.k1, self.k2, self.p1, self.p2, self.k3,
+        ];
+        if all.iter().any(|v| !v.is_finite()) {
+            return Err(IntrinsicsError::NonFinite);
+        }
+        if self.fx <= 0.0 || self.fy <= 0.0 {
+            return Err(IntrinsicsError::NonPositiveFocal {
+                fx_px: self.fx,
+                fy_px: self.fy,
+            });
+        }
+        let size = width.max(height).max(1);
+        let (min_px, max_px) = (0.02 * size as f64, 1000.0 * size as f64);
+        for focal_px in [self.fx, self.fy] {
+            if !(min_px..=max_px).contains(&focal_px) {
+                return Err(IntrinsicsError::FocalOutOfRange {
+                    focal_px,
+                    size_px: size,
+                    min_px,
+                    max_px,
+                });
+            }
+        }
+        let (w, h) = (width as f64, height as f64);
+        if !(-w..=2.0 * w).contains(&self.cx) || !(-h..=2.0 * h).contains(&self.cy) {
+            return Err(IntrinsicsError::PrincipalPoint {
+                cx_px: self.cx,
+                cy_px: self.cy,
+                width_px: width,
+                height_px: height,
+            });
+        }
+        for (name, value, limit) in [
+            ("k1", self.k1, 1e3),
+            ("k2", self.k2, 1e3),
+            ("k3", self.k3, 1e3),
+            ("p1", self.p1, 1.0),
+            ("p2", self.p2, 1.0),
+        ] {
+            if value.abs() > limit {
+                return Err(IntrinsicsError::Distortion { name, value, limit });
+            }
+        }
+        Ok(())
+    }
 }
 
 /// Which intrinsics the fit may correct, in this order (the paper's π_m).
@@ -88,16 +182,22 @@ impl Intrinsics {
             k2: 0.0,
             p1: 0.0,
             p2: 0.0,
+            k3: 0.0,
         }
     }
 
     pub fn has_distortion(&self) -> bool {
-        self.k1 != 0.0 || self.k2 != 0.0 || self.p1 != 0.0 || self.p2 != 0.0
+        self.k1 != 0.0 || self.k2 != 0.0 || self.p1 != 0.0 || self.p2 != 0.0 || self.k3 != 0.0
+    }
+
+    /// d(radial factor)/d(r²) at r².
+    fn radial_slope(&self, r2: f64) -> f64 {
+        self.k1 + 2.0 * self.k2 * r2 + 3.0 * self.k3 * r2 * r2
     }
 
     fn distort_parts(&self, xn: f64, yn: f64) -> Distorted {
         let r2 = xn * xn + yn * yn;
-        let radial = 1.0 + self.k1 * r2 + self.k2 * r2 * r2;
+        let radial = 1.0 + r2 * (self.k1 + r2 * (self.k2 + r2 * self.k3));
         let xd = xn * radial + 2.0 * self.p1 * xn * yn + self.p2 * (r2 + 2.0 * xn * xn);
         let yd = yn * radial + self.p1 * (r2 + 2.0 * yn * yn) + 2.0 * self.p2 * xn * yn;
         Distorted {
@@ -139,7 +239,7 @@ impl Intrinsics {
         let d = self.distort_parts(p.x * inv_z, p.y * inv_z);
         let (x, y) = (d.xn, d.yn);
         // Derivative of the radial factor with respect to r², then the 2×2 distortion Jacobian.
-        let dradial = self.k1 + 2.0 * self.k2 * d.r2;
+        let dradial = self.radial_slope(d.r2);
         let dxd_dx = d.radial + 2.0 * x * x * dradial + 2.0 * self.p1 * y + 6.0 * self.p2 * x;
         let dxd_dy = 2.0 * x * y * dradial + 2.0 * self.p1 * x + 2.0 * self.p2 * y;
         let dyd_dx = 2.0 * x * y * dradial + 2.0 * self.p1 * x + 2.0 * self.p2 * y;
@@ -182,7 +282,7 @@ impl Intrinsics {
                 break;
             }
             // Jacobian of (x'', y'') with respect to (x', y') at n.
-            let dradial = self.k1 + 2.0 * self.k2 * d.r2;
+            let dradial = self.radial_slope(d.r2);
             let a =
                 d.radial + 2.0 * n.x * n.x * dradial + 2.0 * self.p1 * n.y + 6.0 * self.p2 * n.x;
             let b = 2.0 * n.x * n.y * dradial + 2.0 * self.p1 * n.x + 2.0 * self.p2 * n.y;
@@ -321,6 +421,7 @@ mod tests {
             k2: rng.range(-0.05, 0.05),
             p1: rng.range(-0.005, 0.005),
             p2: rng.range(-0.005, 0.005),
+            k3: rng.range(-0.02, 0.02),
         };
         let rot =
             crate::geometry::pose::rotation_from_vector(rng.unit_vector() * rng.range(0.0, 0.2));

@@ -24,6 +24,10 @@ pub struct SceneFile {
     pub zoom_changes: Vec<[i64; 2]>,
 }
 
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
+}
+
 fn default_fps() -> f64 {
     30.0
 }
@@ -51,6 +55,9 @@ pub struct CameraEntry {
     pub p1: f64,
     #[serde(default)]
     pub p2: f64,
+    /// OpenCV's third radial coefficient (r⁶); optional, written only when non-zero.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub k3: f64,
     #[serde(default = "identity")]
     pub rotation: [[f64; 3]; 3],
     #[serde(default)]

@@ -6,6 +6,7 @@
 use super::format::CameraEntry;
 use super::template::{PathTemplate, TemplateError};
 use crate::error::InputError;
+use crate::geometry::camera::IntrinsicsError;
 use crate::geometry::mesh_io::load_mesh;
 use crate::geometry::pose::is_rotation;
 use crate::geometry::{Affine, Camera, Extrinsics, Intrinsics, Mesh};
@@ -38,10 +39,8 @@ pub enum CameraProblem {
     Name(NameError),
     #[error("image size {width_px}×{height_px} must be positive (and at most 16384)")]
     Size { width_px: i64, height_px: i64 },
-    #[error("intrinsics must be finite numbers")]
-    NonFiniteIntrinsics,
-    #[error("focal lengths must be positive, got fx={fx_px} fy={fy_px}")]
-    FocalLength { fx_px: f64, fy_px: f64 },
+    #[error(transparent)]
+    Intrinsics(IntrinsicsError),
     #[error("'rotation' is not a rotation matrix (rows must be orthonormal with determinant +1)")]
     NotRotation,
     #[error("'translation' must be finite")]
@@ -100,16 +99,20 @@ pub(super) fn validate_camera(
             height_px: c.height,
         }));
     }
-    let nums = [c.fx, c.fy, c.cx, c.cy, c.k1, c.k2, c.p1, c.p2];
-    if nums.iter().any(|v| !v.is_finite()) {
-        return Err(bad(CameraProblem::NonFiniteIntrinsics));
-    }
-    if c.fx <= 0.0 || c.fy <= 0.0 {
-        return Err(bad(CameraProblem::FocalLength {
-            fx_px: c.fx,
-            fy_px: c.fy,
-        }));
-    }
+    let intrinsics = Intrinsics {
+        fx: c.fx,
+        fy: c.fy,
+        cx: c.cx,
+        cy: c.cy,
+        k1: c.k1,
+        k2: c.k2,
+        p1: c.p1,
+        p2: c.p2,
+        k3: c.k3,
+    };
+    intrinsics
+        .check_plausible(c.width as u32, c.height as u32)
+        .map_err(|e| bad(CameraProblem::Intrinsics(e)))?;
     let r = DMat3::from_cols(
         DVec3::new(c.rotation[0][0], c.rotation[1][0], c.rotation[2][0]),
         DVec3::new(c.rotation[0][1], c.rotation[1][1], c.rotation[2][1]),
@@ -133,16 +136,7 @@ pub(super) fn validate_camera(
             name: c.name.clone(),
             width: c.width as u32,
             height: c.height as u32,
-            intrinsics: Intrinsics {
-                fx: c.fx,
-                fy: c.fy,
-                cx: c.cx,
-                cy: c.cy,
-                k1: c.k1,
-                k2: c.k2,
-                p1: c.p1,
-                p2: c.p2,
-            },
+            intrinsics,
             extrinsics: Extrinsics {
                 rotation: r,
                 translation_mm: t,

@@ -202,6 +202,7 @@ pub fn write_scene(
                     k2: i.k2,
                     p1: i.p1,
                     p2: i.p2,
+                    k3: i.k3,
                     rotation: [0, 1, 2].map(|row| [r.x_axis[row], r.y_axis[row], r.z_axis[row]]),
                     translation: c.extrinsics.translation_mm.to_array(),
                 }

@@ -1,0 +1,1 @@
+//! Calibration files (placeholder: being written).

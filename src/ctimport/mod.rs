@@ -1,0 +1,1 @@
+//! CT label volumes to meshes (placeholder: being written).

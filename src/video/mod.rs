@@ -1,0 +1,1 @@
+//! Video frames (placeholder: being written).
