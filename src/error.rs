@@ -54,3 +54,13 @@ pub type Result<T, E = Error> = std::result::Result<T, E>;
 pub fn input_err(path: impl AsRef<Path>, problem: impl Into<String>) -> Error {
     Error::Input(InputError::new(path, problem))
 }
+
+/// A text file's contents without a leading UTF-8 byte-order mark (some Windows tools write
+/// one before JSON; CONTRACT §2 accepts it).
+pub fn read_text(path: &Path) -> std::io::Result<String> {
+    let text = std::fs::read_to_string(path)?;
+    Ok(match text.strip_prefix('\u{feff}') {
+        Some(rest) => rest.to_string(),
+        None => text,
+    })
+}

@@ -63,7 +63,7 @@ pub fn write_seeds_into_scene(
     let n = write_seed_pngs(scene, root, &template, seeds)?;
     if scene.seeds_template.is_none() {
         let json = root.join("scene.json");
-        let text = std::fs::read_to_string(&json).map_err(|source| Error::Write {
+        let text = crate::error::read_text(&json).map_err(|source| Error::Write {
             path: json.clone(),
             source,
         })?;

@@ -280,7 +280,7 @@ fn run(cli: Cli) -> Result<()> {
 /// Reads `track --config FILE`.
 fn read_fit_config(path: &std::path::Path) -> Result<RecordedRun> {
     let bad = |problem: String| endofuse::InputError::new(path, problem);
-    let text = std::fs::read_to_string(path).map_err(|e| bad(format!("cannot read: {e}")))?;
+    let text = endofuse::error::read_text(path).map_err(|e| bad(format!("cannot read: {e}")))?;
     let run = RecordedRun::from_json(&text).map_err(|e| bad(e.to_string()))?;
     run.config
         .validate()

@@ -162,7 +162,7 @@ impl Session {
 
     /// Reads and checks a session file.
     pub fn load(path: &Path) -> Result<Session, InputError> {
-        let text = std::fs::read_to_string(path)
+        let text = crate::error::read_text(path)
             .map_err(|e| InputError::new(path, format!("cannot read: {e}")))?;
         let session: Session = serde_json::from_str(&text)
             .map_err(|e| InputError::new(path, format!("not a session file: {e}")))?;

@@ -141,6 +141,16 @@ fn bad_values_in_scene_json() {
             "focal lengths must be positive",
         ),
         (
+            "huge-focal",
+            Box::new(|v| v["cameras"][0]["fx"] = 1e308.into()),
+            "implausible",
+        ),
+        (
+            "far-centre",
+            Box::new(|v| v["cameras"][1]["cx"] = 1e6.into()),
+            "principal point",
+        ),
+        (
             "template",
             Box::new(|v| v["cameras"][0]["frames"] = "left/{frme}.png".into()),
             "unknown placeholder",
@@ -166,6 +176,46 @@ fn bad_values_in_scene_json() {
         edit_json(&d, edit);
         expect_bad(&d, "scene.json", words);
     }
+}
+
+/// Files other tools wrote (issue 11 §6): a BOM before the JSON, a ground-truth trajectory
+/// whose frames carry keys of their own (of any type) are read; a ground-truth label image of
+/// the wrong size is refused by `info` as `classify` would refuse it.
+#[test]
+fn files_other_tools_wrote() {
+    let d = scratch("bom");
+    let p = d.join("scene.json");
+    let text = std::fs::read_to_string(&p).unwrap();
+    std::fs::write(&p, format!("\u{feff}{text}")).unwrap();
+    let (code, stderr) = info(&d);
+    assert_eq!(code, 0, "a BOM before scene.json must be accepted: {stderr}");
+
+    let d = scratch("foreign-trajectory");
+    let frame = |t: u32| {
+        serde_json::json!({
+            "frame": t, "affine": [1,0,0, 0,1,0, 0,0,1, 0,0,150],
+            "shape": {"kidney": {"modes": 3, "weights": [0.1, 0.2]}},
+            "tools": [{"name": "grasper", "tip": [1, 2, 3]}],
+            "energy": "n/a", "lost": 0,
+            "centroids": {"kidney": [0.0, 0.0, 150.0]}
+        })
+    };
+    std::fs::write(
+        d.join("gt/trajectory.json"),
+        format!("\u{feff}{}", serde_json::json!({"frames": [frame(0), frame(1)], "creator": {"tool": "other"}})),
+    )
+    .unwrap();
+    edit_json(&d, |v| {
+        v["ground_truth"]["trajectory"] = "gt/trajectory.json".into();
+    });
+    let (code, stderr) = info(&d);
+    assert_eq!(code, 0, "foreign keys in trajectory frames must be ignored: {stderr}");
+
+    let d = scratch("gt-size");
+    image::GrayImage::new(10, 10)
+        .save(d.join("gt/right/000001.png"))
+        .unwrap();
+    expect_bad(&d, "gt/right/000001.png", "ground-truth label image is 10×10");
 }
 
 #[test]

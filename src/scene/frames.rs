@@ -148,17 +148,23 @@ pub fn decode_frame(path: &Path, size: (u32, u32)) -> Result<RgbImage, InputErro
 /// Reads only the header: the frame exists, is an image, and has the camera's size.
 pub fn check_frame_header(path: &Path, size: (u32, u32)) -> Result<(), InputError> {
     missing(path)?;
+    check_image_header(path, size, "frame")
+}
+
+/// Reads only the header of an existing image (`what` names it in messages) and checks its
+/// size against the camera's.
+pub fn check_image_header(path: &Path, size: (u32, u32), what: &str) -> Result<(), InputError> {
     let dims = image::ImageReader::open(path)
-        .map_err(|e| InputError::new(path, format!("missing frame: {e}")))?
+        .map_err(|e| InputError::new(path, format!("cannot open {what}: {e}")))?
         .with_guessed_format()
-        .map_err(|e| InputError::new(path, format!("cannot read frame: {e}")))?
+        .map_err(|e| InputError::new(path, format!("cannot read {what}: {e}")))?
         .into_dimensions()
         .map_err(|e| InputError::new(path, format!("not a readable image: {e}")))?;
     if dims != size {
         return Err(InputError::new(
             path,
             format!(
-                "frame is {}×{} but the camera is {}×{}",
+                "{what} is {}×{} but the camera is {}×{}",
                 dims.0, dims.1, size.0, size.1
             ),
         ));

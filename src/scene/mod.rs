@@ -127,7 +127,7 @@ impl Scene {
     /// Loads and validates a scene.json and everything it refers to; every frame must exist
     /// and its header give the camera's size.
     pub fn load(json_path: &Path) -> Result<Scene, InputError> {
-        let text = std::fs::read_to_string(json_path).map_err(|e| {
+        let text = crate::error::read_text(json_path).map_err(|e| {
             let what = if json_path.exists() {
                 format!("cannot read: {e}")
             } else {
@@ -263,6 +263,7 @@ impl Scene {
         }
         if let Some(gt) = &file.ground_truth {
             scene.ground_truth = scene.load_ground_truth(gt, json_path)?;
+            scene.check_ground_truth_headers()?;
         }
         Ok(scene)
     }
@@ -387,6 +388,32 @@ impl Scene {
         Ok(img)
     }
 
+    /// Every ground-truth label image that exists (visible and hidden structures) has its
+    /// camera's size, so that `info` refuses what `classify` and `track` would (headers only).
+    fn check_ground_truth_headers(&self) -> Result<(), InputError> {
+        let Some(root) = &self.root else {
+            return Ok(());
+        };
+        let gt = &self.ground_truth;
+        let hidden: Vec<&Structure> = self.structures.iter().filter(|s| !s.visible).collect();
+        for cam in &self.cameras {
+            let size = (cam.width, cam.height);
+            for t in 0..self.frame_count {
+                let mut paths = Vec::new();
+                if let Some(l) = &gt.labels {
+                    paths.push(root.join(l.expand(t, &cam.name, "")));
+                }
+                if let Some(h) = &gt.hidden {
+                    paths.extend(hidden.iter().map(|s| root.join(h.expand(t, &cam.name, &s.name))));
+                }
+                for path in paths.iter().filter(|p| p.exists()) {
+                    frames::check_image_header(path, size, "ground-truth label image")?;
+                }
+            }
+        }
+        Ok(())
+    }
+
     /// Every frame file exists and its header gives its camera's size (cheap).
     fn check_frame_headers(&self) -> Result<(), InputError> {
         for (c, cam) in self.cameras.iter().enumerate() {
@@ -490,7 +517,7 @@ impl Scene {
         let trajectory = match &gt.trajectory {
             Some(rel) => {
                 let path = root.join(rel);
-                let text = std::fs::read_to_string(&path).map_err(|e| {
+                let text = crate::error::read_text(&path).map_err(|e| {
                     InputError::new(&path, format!("cannot read ground-truth trajectory: {e}"))
                 })?;
                 let traj: Trajectory = serde_json::from_str(&text)

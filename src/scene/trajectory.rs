@@ -41,23 +41,63 @@ pub struct TrajectoryFrame {
     pub frame: u32,
     /// q1…q12 of eq. 2.
     pub affine: Vec<f64>,
-    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    /// Shape weights per structure. Another tool's ground truth may use the key for its own
+    /// data: whatever does not read as weights is ignored, like an unknown key.
+    #[serde(
+        default,
+        skip_serializing_if = "BTreeMap::is_empty",
+        deserialize_with = "lenient"
+    )]
     pub shape: BTreeMap<String, Vec<f64>>,
     #[serde(default)]
     pub cameras: Vec<Intrinsics>,
     /// Vertex means of each structure's deformed mesh in camera-0 coordinates, mm.
     #[serde(default)]
     pub centroids: BTreeMap<String, [f64; 3]>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        deserialize_with = "lenient"
+    )]
     pub energy: Option<f64>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        deserialize_with = "lenient"
+    )]
     pub iterations: Option<u32>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        deserialize_with = "lenient"
+    )]
     pub ms: Option<f64>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        deserialize_with = "lenient"
+    )]
     pub confidence: Option<f64>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        deserialize_with = "lenient"
+    )]
     pub lost: Option<bool>,
+}
+
+/// Reads a value of the expected type, or its default when the file gives something else
+/// under the key (CONTRACT §3: readers ignore what they do not know, whatever its type).
+fn lenient<'de, D, T>(d: D) -> Result<T, D::Error>
+where
+    D: serde::Deserializer<'de>,
+    T: serde::de::DeserializeOwned + Default,
+{
+    let value = serde_json::Value::deserialize(d)?;
+    Ok(serde_json::from_value(value).unwrap_or_else(|e| {
+        log::warn!("trajectory: ignoring a value of another tool's type ({e})");
+        T::default()
+    }))
 }
 
 impl Trajectory {
