@@ -62,6 +62,24 @@ enum Command {
         #[arg(long)]
         config: Option<PathBuf>,
     },
+    /// A CT label volume (NIfTI .nii/.nii.gz) → kidney and tumour surface meshes in mm.
+    ImportCt {
+        labels: PathBuf,
+        #[arg(long)]
+        out: PathBuf,
+        /// Which kidney: left, right, or auto (the one the largest tumour touches).
+        #[arg(long, default_value = "auto")]
+        side: String,
+        /// Label numbers, e.g. kidney=1,tumour=2,cyst=3 (KiTS by default).
+        #[arg(long = "labels", value_name = "MAP")]
+        labels_map: Option<String>,
+        /// Target vertex count of the kidney mesh (tumours get about a quarter).
+        #[arg(long, default_value_t = 5000)]
+        vertices: usize,
+        /// Replace a non-empty output folder.
+        #[arg(long)]
+        force: bool,
+    },
     /// Write a synthetic stereo endoscopic phantom scene with ground truth.
     Synth {
         #[arg(long)]
@@ -239,6 +257,40 @@ fn run(cli: Cli) -> Result<()> {
                     c.cx_error_px_mean
                 );
             }
+            Ok(())
+        }
+        Some(Command::ImportCt {
+            labels,
+            out,
+            side,
+            labels_map,
+            vertices,
+            force,
+        }) => {
+            let mut options = endofuse::ctimport::ImportOptions {
+                side: endofuse::ctimport::Side::parse(&side).ok_or_else(|| {
+                    endofuse::InputError::new("--side", format!("'{side}' is not left, right or auto"))
+                })?,
+                kidney_vertices: vertices.max(100),
+                tumour_vertices: (vertices / 4).max(100),
+                force,
+                ..Default::default()
+            };
+            if let Some(spec) = &labels_map {
+                options
+                    .set_labels(spec)
+                    .map_err(|p| endofuse::InputError::new("--labels", p))?;
+            }
+            let started = std::time::Instant::now();
+            let report = endofuse::ctimport::import_ct(&labels, &out, &options, &|stage| {
+                eprintln!("import-ct: {stage}")
+            })?;
+            print!("{}", endofuse::ctimport::summary(&report));
+            eprintln!(
+                "import-ct: wrote {} in {:.1} s",
+                out.display(),
+                started.elapsed().as_secs_f64()
+            );
             Ok(())
         }
         Some(Command::Synth {

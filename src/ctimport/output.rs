@@ -1,0 +1,126 @@
+//! The `import-ct` output folder (CONTRACT §4): `meshes/*.obj`, `meshes/*_catalog/*.obj`,
+//! `structures.json` (the scene.json `structures` entries) and `ct.json` (the report). Written
+//! into a temporary sibling folder and renamed at the end, so a failure leaves nothing half-made
+//! and an existing folder is replaced only with `--force`.
+
+use super::{ImportOptions, ImportReport};
+use crate::error::{Error, InputError};
+use crate::geometry::mesh_io::write_obj;
+use crate::geometry::Mesh;
+use crate::scene::format::StructureEntry;
+use std::path::{Path, PathBuf};
+
+/// Refuses an output folder that exists and is not empty, unless `force`.
+pub fn check_target(out: &Path, force: bool) -> Result<(), Error> {
+    if out.is_file() {
+        return Err(InputError::new(out, "is a file; --out needs a folder").into());
+    }
+    let non_empty = std::fs::read_dir(out).is_ok_and(|mut d| d.next().is_some());
+    if non_empty && !force {
+        return Err(InputError::new(
+            out,
+            "output folder exists and is not empty (choose another or pass --force to replace it)",
+        )
+        .into());
+    }
+    Ok(())
+}
+
+/// A temporary folder next to `out`, renamed onto it by [`commit`].
+pub fn staging(out: &Path) -> Result<PathBuf, Error> {
+    let name = out
+        .file_name()
+        .map(|n| n.to_string_lossy().to_string())
+        .unwrap_or_else(|| "out".into());
+    let parent = out
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    std::fs::create_dir_all(parent).map_err(|source| Error::Write {
+        path: parent.to_path_buf(),
+        source,
+    })?;
+    let tmp = parent.join(format!(".{name}.partial-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&tmp);
+    std::fs::create_dir_all(&tmp).map_err(|source| Error::Write {
+        path: tmp.clone(),
+        source,
+    })?;
+    Ok(tmp)
+}
+
+/// Moves the staged folder onto `out` (replacing what is there).
+pub fn commit(tmp: &Path, out: &Path) -> Result<(), Error> {
+    if out.exists() {
+        std::fs::remove_dir_all(out).map_err(|source| Error::Remove {
+            path: out.to_path_buf(),
+            source,
+        })?;
+    }
+    std::fs::rename(tmp, out).map_err(|source| Error::Write {
+        path: out.to_path_buf(),
+        source,
+    })
+}
+
+/// The scene.json entries of the imported structures, paths relative to the output folder.
+pub fn structure_entries(report: &ImportReport) -> Vec<StructureEntry> {
+    report
+        .structures
+        .iter()
+        .map(|s| StructureEntry {
+            name: s.name.clone(),
+            label: s.label as i64,
+            visible: s.visible,
+            mesh: format!("meshes/{}.obj", s.name),
+            catalog: Some(format!("meshes/{}_catalog", s.name)),
+        })
+        .collect()
+}
+
+/// Writes everything into a staging folder, then renames it onto `out`.
+pub fn write(out: &Path, report: &ImportReport, options: &ImportOptions) -> Result<(), Error> {
+    let tmp = staging(out)?;
+    let result = write_into(&tmp, report, options);
+    match result {
+        Ok(()) => commit(&tmp, out),
+        Err(e) => {
+            let _ = std::fs::remove_dir_all(&tmp);
+            Err(e)
+        }
+    }
+}
+
+fn write_into(dir: &Path, report: &ImportReport, options: &ImportOptions) -> Result<(), Error> {
+    let w = |path: PathBuf| move |source| Error::Write { path, source };
+    let meshes_dir = dir.join("meshes");
+    std::fs::create_dir_all(&meshes_dir).map_err(w(meshes_dir.clone()))?;
+    let meshes: Vec<&Mesh> = report.structures.iter().map(|s| &s.mesh).collect();
+    // One joint field per sample, applied to every structure: a hidden tumour moves with the
+    // tissue around it (the same generator a scene without a catalog uses).
+    let catalog = crate::shape::generate_catalog(
+        &meshes,
+        0,
+        options.catalog_size,
+        crate::shape::CATALOG_SEED,
+    );
+    for (s, samples) in report.structures.iter().zip(&catalog) {
+        let path = meshes_dir.join(format!("{}.obj", s.name));
+        write_obj(&path, &s.mesh).map_err(w(path.clone()))?;
+        let cat_dir = meshes_dir.join(format!("{}_catalog", s.name));
+        std::fs::create_dir_all(&cat_dir).map_err(w(cat_dir.clone()))?;
+        for (k, vertices) in samples.iter().enumerate() {
+            let p = cat_dir.join(format!("{k:03}.obj"));
+            let m = Mesh::new(vertices.clone(), s.mesh.faces.clone());
+            write_obj(&p, &m).map_err(w(p.clone()))?;
+        }
+    }
+    let entries = structure_entries(report);
+    let p = dir.join("structures.json");
+    let text = serde_json::to_string_pretty(&entries).unwrap_or_default();
+    std::fs::write(&p, text + "\n").map_err(w(p.clone()))?;
+    let p = dir.join("ct.json");
+    let text = serde_json::to_string_pretty(report).unwrap_or_default();
+    std::fs::write(&p, text + "\n").map_err(w(p.clone()))?;
+    Ok(())
+}

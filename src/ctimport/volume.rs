@@ -1,0 +1,402 @@
+//! A CT label volume read from NIfTI-1 (`.nii`, `.nii.gz`) with the `nifti` crate: integer
+//! labels on a voxel grid (index `i` fastest, as NIfTI stores it) and the voxel-to-world map in
+//! millimetres. The map is the sform when its code is set, else the qform (quaternion, qfac),
+//! else the pixdim diagonal — NIfTI's own precedence for "method 3, then 2, then 1". Any axis
+//! order and orientation follow from that map; nothing assumes KiTS's layout.
+
+use glam::{DMat3, DVec3};
+use nifti::{NiftiObject, NiftiType, ReaderOptions};
+use std::path::Path;
+
+/// Which of the header's transforms gave world coordinates.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum WorldTransform {
+    Sform,
+    Qform,
+    Pixdim,
+}
+
+/// Integer labels on a 3D grid with its voxel-to-world map.
+#[derive(Debug, Clone)]
+pub struct LabelVolume {
+    /// Voxels along i, j, k.
+    pub dims: [usize; 3],
+    /// Label of voxel (i, j, k) at `i + dims[0]·(j + dims[1]·k)`.
+    pub labels: Vec<u16>,
+    /// world = linear · (i, j, k) + offset, millimetres.
+    pub linear: DMat3,
+    pub offset_mm: DVec3,
+    pub transform: WorldTransform,
+    /// The NIfTI datatype as stored (for ct.json).
+    pub datatype: String,
+}
+
+/// What can be wrong with a label volume file. The caller names the file.
+#[derive(Debug, thiserror::Error)]
+pub enum VolumeError {
+    #[error("cannot read NIfTI ({0}); is the file complete and a .nii or .nii.gz?")]
+    Read(String),
+    #[error("not gzip data although the name ends in .gz")]
+    NotGzip,
+    #[error("a {0}-dimensional volume: a label map has 3 dimensions (a 4th of size 1 is allowed)")]
+    Dimensions(usize),
+    #[error("datatype {0} cannot hold labels (uint8, int8, uint16, int16, int32, uint32, float32 or float64)")]
+    Datatype(String),
+    #[error("{count} voxels are not whole non-negative labels (e.g. {example}); is this a CT intensity image rather than a label map?")]
+    NotLabels { count: usize, example: f64 },
+    #[error("the voxel-to-world transform is degenerate (determinant {0:e}); check sform/qform/pixdim")]
+    Transform(f64),
+    #[error("the volume is empty (a dimension of size 0)")]
+    Empty,
+}
+
+impl LabelVolume {
+    pub fn voxel_count(&self) -> usize {
+        self.dims.iter().product()
+    }
+
+    pub fn index(&self, i: usize, j: usize, k: usize) -> usize {
+        i + self.dims[0] * (j + self.dims[1] * k)
+    }
+
+    /// Volume of one voxel, mm³.
+    pub fn voxel_volume_mm3(&self) -> f64 {
+        self.linear.determinant().abs()
+    }
+
+    /// Edge lengths of a voxel along i, j, k, mm.
+    pub fn spacing_mm(&self) -> [f64; 3] {
+        [
+            self.linear.x_axis.length(),
+            self.linear.y_axis.length(),
+            self.linear.z_axis.length(),
+        ]
+    }
+
+    /// World position of a (fractional) voxel index, mm.
+    pub fn world(&self, ijk: DVec3) -> DVec3 {
+        self.linear * ijk + self.offset_mm
+    }
+}
+
+/// Reads a label volume. Gzip is recognised by its magic bytes, not only by the name.
+pub fn read(path: &Path) -> Result<LabelVolume, VolumeError> {
+    let head = std::fs::read(path)
+        .map(|b| b.into_iter().take(2).collect::<Vec<u8>>())
+        .map_err(|e| VolumeError::Read(e.to_string()))?;
+    let gz_name = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("gz"));
+    if gz_name && head != [0x1f, 0x8b] {
+        return Err(VolumeError::NotGzip);
+    }
+    let obj = ReaderOptions::new()
+        .read_file(path)
+        .map_err(|e| VolumeError::Read(e.to_string()))?;
+    let header = obj.header().clone();
+    let ndim = header.dim[0] as usize;
+    let dims_all: Vec<usize> = header.dim[1..=ndim.clamp(1, 7)]
+        .iter()
+        .map(|&d| d as usize)
+        .collect();
+    if !(3..=4).contains(&ndim) || (ndim == 4 && dims_all[3] != 1) {
+        return Err(VolumeError::Dimensions(ndim));
+    }
+    let dims = [dims_all[0], dims_all[1], dims_all[2]];
+    if dims.contains(&0) {
+        return Err(VolumeError::Empty);
+    }
+    let datatype = header
+        .data_type()
+        .map_err(|e| VolumeError::Datatype(e.to_string()))?;
+    let raw = obj.into_volume().into_raw_data();
+    let big = header.endianness == nifti::Endianness::Big;
+    let labels = decode_labels(&raw, datatype, big, dims.iter().product())?;
+    let (linear, offset_mm, transform) = world_map(&header);
+    let det = linear.determinant();
+    if !det.is_finite() || det.abs() < 1e-9 {
+        return Err(VolumeError::Transform(det));
+    }
+    Ok(LabelVolume {
+        dims,
+        labels,
+        linear,
+        offset_mm,
+        transform,
+        datatype: format!("{datatype:?}").to_lowercase(),
+    })
+}
+
+/// Raw voxel bytes to labels. `scl_slope`/`scl_inter` are ignored on purpose: label maps
+/// store labels, and KiTS files carry NaN there.
+fn decode_labels(
+    raw: &[u8],
+    datatype: NiftiType,
+    big_endian: bool,
+    count: usize,
+) -> Result<Vec<u16>, VolumeError> {
+    let size = match datatype {
+        NiftiType::Uint8 | NiftiType::Int8 => 1,
+        NiftiType::Uint16 | NiftiType::Int16 => 2,
+        NiftiType::Int32 | NiftiType::Uint32 | NiftiType::Float32 => 4,
+        NiftiType::Float64 => 8,
+        other => return Err(VolumeError::Datatype(format!("{other:?}").to_lowercase())),
+    };
+    if raw.len() < count * size {
+        return Err(VolumeError::Read(format!(
+            "{} bytes of voxel data, the header says {}",
+            raw.len(),
+            count * size
+        )));
+    }
+    let word = |b: &[u8]| -> u64 {
+        let mut v = 0u64;
+        for (n, &x) in b.iter().enumerate() {
+            let shift = if big_endian { (b.len() - 1 - n) * 8 } else { n * 8 };
+            v |= (x as u64) << shift;
+        }
+        v
+    };
+    let value = |b: &[u8]| -> f64 {
+        let w = word(b);
+        match datatype {
+            NiftiType::Uint8 | NiftiType::Uint16 | NiftiType::Uint32 => w as f64,
+            NiftiType::Int8 => w as u8 as i8 as f64,
+            NiftiType::Int16 => w as u16 as i16 as f64,
+            NiftiType::Int32 => w as u32 as i32 as f64,
+            NiftiType::Float32 => f32::from_bits(w as u32) as f64,
+            _ => f64::from_bits(w),
+        }
+    };
+    let mut bad = 0usize;
+    let mut example = 0.0;
+    let labels = raw[..count * size]
+        .chunks_exact(size)
+        .map(|b| {
+            let v = value(b);
+            if v.is_finite() && v >= 0.0 && v <= u16::MAX as f64 && v.fract() == 0.0 {
+                v as u16
+            } else {
+                if bad == 0 {
+                    example = v;
+                }
+                bad += 1;
+                0
+            }
+        })
+        .collect();
+    if bad > 0 {
+        return Err(VolumeError::NotLabels {
+            count: bad,
+            example,
+        });
+    }
+    Ok(labels)
+}
+
+/// Millimetres per unit of the header's spatial unit code (0 unknown: millimetres assumed).
+fn unit_mm(xyzt_units: u8) -> f64 {
+    match xyzt_units & 0x07 {
+        1 => 1000.0,
+        3 => 0.001,
+        _ => 1.0,
+    }
+}
+
+fn world_map(h: &nifti::NiftiHeader) -> (DMat3, DVec3, WorldTransform) {
+    let u = unit_mm(h.xyzt_units);
+    let finite = |v: &[f32]| v.iter().all(|x| x.is_finite());
+    if h.sform_code > 0 && finite(&h.srow_x) && finite(&h.srow_y) && finite(&h.srow_z) {
+        let row = |r: &[f32; 4]| DVec3::new(r[0] as f64, r[1] as f64, r[2] as f64) * u;
+        let (x, y, z) = (row(&h.srow_x), row(&h.srow_y), row(&h.srow_z));
+        // Rows of the 3×3 part: columns are the world steps of i, j, k.
+        let linear = DMat3::from_cols(
+            DVec3::new(x.x, y.x, z.x),
+            DVec3::new(x.y, y.y, z.y),
+            DVec3::new(x.z, y.z, z.z),
+        );
+        let offset = DVec3::new(h.srow_x[3] as f64, h.srow_y[3] as f64, h.srow_z[3] as f64) * u;
+        return (linear, offset, WorldTransform::Sform);
+    }
+    let pix = |n: usize| {
+        let v = h.pixdim[n].abs() as f64;
+        if v.is_finite() && v > 0.0 { v } else { 1.0 }
+    } * u;
+    let spacing = DMat3::from_diagonal(DVec3::new(pix(1), pix(2), pix(3)));
+    if h.qform_code > 0 {
+        let (b, c, d) = (
+            h.quatern_b as f64,
+            h.quatern_c as f64,
+            h.quatern_d as f64,
+        );
+        let a = (1.0 - (b * b + c * c + d * d)).max(0.0).sqrt();
+        // NIfTI-1 qform rotation (nifti1.h, "METHOD 2").
+        let r = DMat3::from_cols(
+            DVec3::new(
+                a * a + b * b - c * c - d * d,
+                2.0 * (b * c + a * d),
+                2.0 * (b * d - a * c),
+            ),
+            DVec3::new(
+                2.0 * (b * c - a * d),
+                a * a + c * c - b * b - d * d,
+                2.0 * (c * d + a * b),
+            ),
+            DVec3::new(
+                2.0 * (b * d + a * c),
+                2.0 * (c * d - a * b),
+                a * a + d * d - c * c - b * b,
+            ),
+        );
+        let qfac = if h.pixdim[0] < 0.0 { -1.0 } else { 1.0 };
+        let flip = DMat3::from_diagonal(DVec3::new(1.0, 1.0, qfac));
+        let offset = DVec3::new(
+            h.quatern_x as f64,
+            h.quatern_y as f64,
+            h.quatern_z as f64,
+        ) * u;
+        let offset = if offset.is_finite() {
+            offset
+        } else {
+            DVec3::ZERO
+        };
+        return (r * flip * spacing, offset, WorldTransform::Qform);
+    }
+    (spacing, DVec3::ZERO, WorldTransform::Pixdim)
+}
+
+/// How [`write`] states the voxel-to-world map.
+#[derive(Debug, Clone, Copy)]
+pub enum WriteTransform {
+    /// sform_code 2 with these rows.
+    Sform,
+    /// qform_code 1: quaternion (b, c, d), qfac, spacing and offset; no sform.
+    Qform {
+        quaternion_bcd: [f32; 3],
+        qfac: f32,
+        spacing_mm: [f32; 3],
+        offset_mm: [f32; 3],
+    },
+    /// Neither: pixdim only.
+    Pixdim { spacing_mm: [f32; 3] },
+}
+
+/// The datatypes [`write`] can store.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum WriteType {
+    Uint8,
+    Int16,
+    Uint16,
+    Float32,
+}
+
+/// Writes a NIfTI-1 single file (`n+1`, 352-byte header) by hand, gzip when the name ends in
+/// `.gz`, so that tests read files this module's reader did not write with the same library.
+/// KiTS quirks are reproduced on request: `vox_offset` 0 and NaN scaling.
+pub fn write(
+    path: &Path,
+    vol: &LabelVolume,
+    transform: WriteTransform,
+    datatype: WriteType,
+    big_endian: bool,
+) -> std::io::Result<()> {
+    let mut h = vec![0u8; 352];
+    let put = |h: &mut Vec<u8>, at: usize, bytes: &[u8]| {
+        let b: Vec<u8> = if big_endian {
+            bytes.iter().rev().copied().collect()
+        } else {
+            bytes.to_vec()
+        };
+        h[at..at + b.len()].copy_from_slice(&b);
+    };
+    put(&mut h, 0, &348i32.to_le_bytes());
+    let dim = [3i16, vol.dims[0] as i16, vol.dims[1] as i16, vol.dims[2] as i16, 1, 1, 1, 1];
+    for (n, d) in dim.iter().enumerate() {
+        put(&mut h, 40 + 2 * n, &d.to_le_bytes());
+    }
+    let (code, bitpix): (i16, i16) = match datatype {
+        WriteType::Uint8 => (2, 8),
+        WriteType::Int16 => (4, 16),
+        WriteType::Uint16 => (512, 16),
+        WriteType::Float32 => (16, 32),
+    };
+    put(&mut h, 70, &code.to_le_bytes());
+    put(&mut h, 72, &bitpix.to_le_bytes());
+    let s = vol.spacing_mm();
+    let mut pixdim = [1.0f32, s[0] as f32, s[1] as f32, s[2] as f32, 1.0, 1.0, 1.0, 1.0];
+    match transform {
+        WriteTransform::Qform {
+            qfac, spacing_mm, ..
+        } => {
+            pixdim[0] = qfac;
+            pixdim[1..4].copy_from_slice(&spacing_mm);
+        }
+        WriteTransform::Pixdim { spacing_mm } => pixdim[1..4].copy_from_slice(&spacing_mm),
+        WriteTransform::Sform => {}
+    }
+    for (n, p) in pixdim.iter().enumerate() {
+        put(&mut h, 76 + 4 * n, &p.to_le_bytes());
+    }
+    // KiTS writes vox_offset 0 and NaN scaling; readers must cope.
+    put(&mut h, 108, &0f32.to_le_bytes());
+    put(&mut h, 112, &f32::NAN.to_le_bytes());
+    put(&mut h, 116, &f32::NAN.to_le_bytes());
+    h[123] = 2; // millimetres
+    match transform {
+        WriteTransform::Sform => {
+            put(&mut h, 254, &2i16.to_le_bytes());
+            let l = vol.linear;
+            let o = vol.offset_mm;
+            let rows = [
+                [l.x_axis.x, l.y_axis.x, l.z_axis.x, o.x],
+                [l.x_axis.y, l.y_axis.y, l.z_axis.y, o.y],
+                [l.x_axis.z, l.y_axis.z, l.z_axis.z, o.z],
+            ];
+            for (r, row) in rows.iter().enumerate() {
+                for (c, v) in row.iter().enumerate() {
+                    put(&mut h, 280 + 16 * r + 4 * c, &(*v as f32).to_le_bytes());
+                }
+            }
+        }
+        WriteTransform::Qform {
+            quaternion_bcd,
+            offset_mm,
+            ..
+        } => {
+            put(&mut h, 252, &1i16.to_le_bytes());
+            for (n, v) in quaternion_bcd.iter().chain(offset_mm.iter()).enumerate() {
+                put(&mut h, 256 + 4 * n, &v.to_le_bytes());
+            }
+        }
+        WriteTransform::Pixdim { .. } => {}
+    }
+    h[344..348].copy_from_slice(b"n+1\0");
+    for &v in &vol.labels {
+        match datatype {
+            WriteType::Uint8 => h.push(v.min(255) as u8),
+            WriteType::Int16 => {
+                let b = (v as i16).to_le_bytes();
+                h.extend(if big_endian { [b[1], b[0]] } else { b });
+            }
+            WriteType::Uint16 => {
+                let b = v.to_le_bytes();
+                h.extend(if big_endian { [b[1], b[0]] } else { b });
+            }
+            WriteType::Float32 => {
+                let mut b = (v as f32).to_le_bytes();
+                if big_endian {
+                    b.reverse();
+                }
+                h.extend(b);
+            }
+        }
+    }
+    if path.extension().is_some_and(|e| e == "gz") {
+        use std::io::Write;
+        let mut enc = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+        enc.write_all(&h)?;
+        h = enc.finish()?;
+    }
+    std::fs::write(path, h)
+}
