@@ -269,7 +269,10 @@ fn run(cli: Cli) -> Result<()> {
         }) => {
             let mut options = endofuse::ctimport::ImportOptions {
                 side: endofuse::ctimport::Side::parse(&side).ok_or_else(|| {
-                    endofuse::InputError::new("--side", format!("'{side}' is not left, right or auto"))
+                    endofuse::InputError::new(
+                        "--side",
+                        format!("'{side}' is not left, right or auto"),
+                    )
                 })?,
                 kidney_vertices: vertices.max(100),
                 tumour_vertices: (vertices / 4).max(100),

@@ -188,7 +188,10 @@ fn files_other_tools_wrote() {
     let text = std::fs::read_to_string(&p).unwrap();
     std::fs::write(&p, format!("\u{feff}{text}")).unwrap();
     let (code, stderr) = info(&d);
-    assert_eq!(code, 0, "a BOM before scene.json must be accepted: {stderr}");
+    assert_eq!(
+        code, 0,
+        "a BOM before scene.json must be accepted: {stderr}"
+    );
 
     let d = scratch("foreign-trajectory");
     let frame = |t: u32| {
@@ -202,20 +205,30 @@ fn files_other_tools_wrote() {
     };
     std::fs::write(
         d.join("gt/trajectory.json"),
-        format!("\u{feff}{}", serde_json::json!({"frames": [frame(0), frame(1)], "creator": {"tool": "other"}})),
+        format!(
+            "\u{feff}{}",
+            serde_json::json!({"frames": [frame(0), frame(1)], "creator": {"tool": "other"}})
+        ),
     )
     .unwrap();
     edit_json(&d, |v| {
         v["ground_truth"]["trajectory"] = "gt/trajectory.json".into();
     });
     let (code, stderr) = info(&d);
-    assert_eq!(code, 0, "foreign keys in trajectory frames must be ignored: {stderr}");
+    assert_eq!(
+        code, 0,
+        "foreign keys in trajectory frames must be ignored: {stderr}"
+    );
 
     let d = scratch("gt-size");
     image::GrayImage::new(10, 10)
         .save(d.join("gt/right/000001.png"))
         .unwrap();
-    expect_bad(&d, "gt/right/000001.png", "ground-truth label image is 10×10");
+    expect_bad(
+        &d,
+        "gt/right/000001.png",
+        "ground-truth label image is 10×10",
+    );
 }
 
 #[test]

@@ -245,7 +245,11 @@ mod tests {
         for k in 0..5 {
             for j in 0..5 {
                 for i in 0..5 {
-                    assert_eq!(fix_cube(&mut e.clone(), i, j, k), 0, "critical at {i},{j},{k}");
+                    assert_eq!(
+                        fix_cube(&mut e.clone(), i, j, k),
+                        0,
+                        "critical at {i},{j},{k}"
+                    );
                 }
             }
         }

@@ -107,7 +107,11 @@ impl ImportOptions {
                 "kidney" => self.kidney_label = v,
                 "tumour" | "tumor" => self.tumour_label = v,
                 "cyst" => self.cyst_label = Some(v),
-                other => return Err(format!("unknown structure '{other}' (kidney, tumour, cyst)")),
+                other => {
+                    return Err(format!(
+                        "unknown structure '{other}' (kidney, tumour, cyst)"
+                    ));
+                }
             }
         }
         if self.kidney_label == self.tumour_label {
@@ -148,6 +152,11 @@ pub struct StructureReport {
     /// Voxels of smaller pieces dropped (a kidney cut in two by an exophytic tumour keeps its
     /// larger piece).
     pub voxels_dropped: usize,
+    /// How far the final surface was moved along its normals to restore the voxel volume
+    /// (positive outwards), mm.
+    pub normal_offset_mm: f64,
+    /// (mesh − voxel) / voxel after smoothing and decimation, before that offset.
+    pub volume_error_before_offset: f64,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub exposure: Option<Exposure>,
     #[serde(skip)]
@@ -197,7 +206,11 @@ pub fn build(
     options: &ImportOptions,
     progress: &dyn Fn(&str),
 ) -> Result<ImportReport, String> {
-    let (kl, tl, cl) = (options.kidney_label, options.tumour_label, options.cyst_label);
+    let (kl, tl, cl) = (
+        options.kidney_label,
+        options.tumour_label,
+        options.cyst_label,
+    );
     let mut present = std::collections::BTreeMap::new();
     for &v in &vol.labels {
         *present.entry(v).or_insert(0usize) += 1;
@@ -206,7 +219,11 @@ pub fn build(
         return Err("the volume is all background (no labelled voxel)".into());
     }
     if !present.contains_key(&kl) {
-        let found: Vec<String> = present.keys().filter(|&&v| v != 0).map(|v| v.to_string()).collect();
+        let found: Vec<String> = present
+            .keys()
+            .filter(|&&v| v != 0)
+            .map(|v| v.to_string())
+            .collect();
         return Err(format!(
             "no voxel has the kidney label {kl} (labels present: {}); use --labels kidney=N,tumour=M",
             found.join(", ")
@@ -235,7 +252,8 @@ pub fn build(
     let kidneys: Vec<u32> = (0..organ_sizes.len() as u32)
         .filter(|&c| organ_sizes[c as usize] * 5 >= largest)
         .collect();
-    let (tumour_id, tumour_sizes) = mask::components(block.dims, |n| vol.labels[block.volume_index(n)] == tl);
+    let (tumour_id, tumour_sizes) =
+        mask::components(block.dims, |n| vol.labels[block.volume_index(n)] == tl);
     let mut notes = Vec::new();
     let (chosen, side_reason) = choose_kidney(
         &kidneys,
@@ -249,10 +267,22 @@ pub fn build(
     )?;
     let kidney_x = centroid_of(&organ_id, chosen).x;
     let side = if kidneys.len() >= 2 {
-        let others: Vec<f64> = kidneys.iter().filter(|&&c| c != chosen).map(|&c| centroid_of(&organ_id, c).x).collect();
-        if others.iter().all(|&x| kidney_x > x) { "right" } else { "left" }
+        let others: Vec<f64> = kidneys
+            .iter()
+            .filter(|&&c| c != chosen)
+            .map(|&c| centroid_of(&organ_id, c).x)
+            .collect();
+        if others.iter().all(|&x| kidney_x > x) {
+            "right"
+        } else {
+            "left"
+        }
     } else {
-        let centre = vol.world(DVec3::new(vol.dims[0] as f64, vol.dims[1] as f64, vol.dims[2] as f64) * 0.5 - 0.5).x;
+        let centre = vol
+            .world(
+                DVec3::new(vol.dims[0] as f64, vol.dims[1] as f64, vol.dims[2] as f64) * 0.5 - 0.5,
+            )
+            .x;
         if kidney_x > centre { "right" } else { "left" }
     };
     // Tumour components inside the chosen organ, largest first.
@@ -278,7 +308,11 @@ pub fn build(
         notes.push("no tumour: the scene has the kidney only".into());
     }
     let spacing = vol.spacing_mm();
-    let face_area = [spacing[1] * spacing[2], spacing[0] * spacing[2], spacing[0] * spacing[1]];
+    let face_area = [
+        spacing[1] * spacing[2],
+        spacing[0] * spacing[2],
+        spacing[0] * spacing[1],
+    ];
     let mut structures = Vec::new();
     let mut exophytic_voxels = vec![false; organ_id.len()];
     let (mut n_exo, mut n_endo) = (0, 0);
@@ -294,7 +328,11 @@ pub fn build(
             n_endo += 1;
             ("tumour_endo", n_endo)
         };
-        let name = if count == 1 { base.to_string() } else { format!("{base}_{count}") };
+        let name = if count == 1 {
+            base.to_string()
+        } else {
+            format!("{base}_{count}")
+        };
         if visible {
             for (x, &ti) in tumour_id.iter().enumerate() {
                 if ti == t {
@@ -309,7 +347,20 @@ pub fn build(
     progress("meshing the kidney");
     let kidney_mask = block.mask(|x| organ_id[x] == chosen && !exophytic_voxels[x]);
     let kidney_voxels = kidney_mask.count();
-    let mut kidney = mesh_structure("kidney", 1, true, kidney_mask, kidney_voxels, vol, options.kidney_vertices)?;
+    if let Some(edge) = touches_volume_edge(&kidney_mask, vol.dims) {
+        notes.push(format!(
+            "the kidney reaches the scan's edge ({edge}): its surface there is the field of view's cut, not anatomy"
+        ));
+    }
+    let mut kidney = mesh_structure(
+        "kidney",
+        1,
+        true,
+        kidney_mask,
+        kidney_voxels,
+        vol,
+        options.kidney_vertices,
+    )?;
     kidney.exposure = None;
     structures.push(kidney);
     for (name, label, visible, n, exposure, m) in tumour_masks {
@@ -371,7 +422,11 @@ fn choose_kidney(
             let pick = pick.ok_or("no kidney component")?;
             if kidneys.len() == 1 {
                 let c = vol
-                    .world(DVec3::new(vol.dims[0] as f64, vol.dims[1] as f64, vol.dims[2] as f64) * 0.5 - 0.5)
+                    .world(
+                        DVec3::new(vol.dims[0] as f64, vol.dims[1] as f64, vol.dims[2] as f64)
+                            * 0.5
+                            - 0.5,
+                    )
                     .x;
                 let is_right = centroid(pick).x > c;
                 if is_right != (side == Side::Right) {
@@ -484,10 +539,17 @@ fn mesh_structure(
     // more vertices than asked where the organ is thin. The dense surface is valid by
     // construction (a well-composed mask).
     let mut mesh = mesh;
-    let valid = |m: &Mesh| surface::topology(m).is_closed_manifold() && surface::self_intersections(m) == 0;
+    let valid =
+        |m: &Mesh| surface::topology(m).is_closed_manifold() && surface::self_intersections(m) == 0;
     while mesh.vertices.len() > target_vertices + target_vertices / 50 {
         let n = mesh.vertices.len() as f64;
-        let tries = [(0.7, false), (0.7, true), (0.85, false), (0.85, true), (0.95, false)];
+        let tries = [
+            (0.7, false),
+            (0.7, true),
+            (0.85, false),
+            (0.85, true),
+            (0.95, false),
+        ];
         let next = |ratio: f64| ((n * ratio) as usize).max(target_vertices);
         let step = tries.into_iter().find_map(|(ratio, regularize)| {
             let mut m = smooth::decimate(&mesh, next(ratio), regularize);
@@ -497,7 +559,10 @@ fn mesh_structure(
         match step {
             Some(m) => mesh = m,
             None => {
-                log::debug!("{name}: decimation stops at {} vertices (no smaller step is valid)", mesh.vertices.len());
+                log::debug!(
+                    "{name}: decimation stops at {} vertices (no smaller step is valid)",
+                    mesh.vertices.len()
+                );
                 break;
             }
         }
@@ -509,8 +574,30 @@ fn mesh_structure(
             topology.open_edges, topology.non_manifold_edges
         ));
     }
-    let self_intersections = surface::self_intersections(&mesh);
     let voxel_volume_mm3 = voxels as f64 * vol.voxel_volume_mm3();
+    // What smoothing and decimation still took (surface nets cut voxel corners; a small
+    // tumour of a few voxels' radius loses a few per cent): give it back by moving the surface
+    // along its normals, by a fraction of a voxel at most, and keep the move only if the mesh
+    // stays valid.
+    let max_offset_mm = 0.5
+        * vol
+            .spacing_mm()
+            .iter()
+            .cloned()
+            .fold(f64::INFINITY, f64::min);
+    let mut normal_offset_mm = 0.0;
+    let volume_before_offset_mm3 = mesh.signed_volume();
+    let offset = smooth::volume_restoring_offset(&mesh, voxel_volume_mm3);
+    if offset.abs() <= max_offset_mm {
+        let moved = smooth::offset_along_normals(&mesh, offset);
+        if surface::topology(&moved).is_closed_manifold()
+            && surface::self_intersections(&moved) == 0
+        {
+            mesh = moved;
+            normal_offset_mm = offset;
+        }
+    }
+    let self_intersections = surface::self_intersections(&mesh);
     let mesh_volume_mm3 = mesh.signed_volume();
     Ok(StructureReport {
         name: name.into(),
@@ -526,9 +613,33 @@ fn mesh_structure(
         self_intersections,
         voxels_added: added,
         voxels_dropped: dropped,
+        normal_offset_mm,
+        volume_error_before_offset: (volume_before_offset_mm3 - voxel_volume_mm3)
+            / voxel_volume_mm3.max(1e-12),
         exposure: None,
         mesh,
     })
+}
+
+/// Which face of the volume a mask touches, if any (e.g. "i = 49").
+fn touches_volume_edge(m: &Mask, dims: [usize; 3]) -> Option<String> {
+    for (n, &inside) in m.data.iter().enumerate() {
+        if !inside {
+            continue;
+        }
+        let local = [
+            n % m.dims[0],
+            (n / m.dims[0]) % m.dims[1],
+            n / (m.dims[0] * m.dims[1]),
+        ];
+        for a in 0..3 {
+            let v = local[a] as isize + m.origin[a];
+            if v == 0 || v == dims[a] as isize - 1 {
+                return Some(format!("{} = {v}", ["i", "j", "k"][a]));
+            }
+        }
+    }
+    None
 }
 
 /// The bounding block of some labels, with a voxel of margin, as a window on the volume.
@@ -621,7 +732,10 @@ pub fn summary(r: &ImportReport) -> String {
             100.0 * st.volume_error,
             st.exposure
                 .as_ref()
-                .map(|e| format!("  {:.1} % of its boundary faces background", 100.0 * e.exposed_share))
+                .map(|e| format!(
+                    "  {:.1} % of its boundary faces background",
+                    100.0 * e.exposed_share
+                ))
                 .unwrap_or_default()
         );
     }

@@ -5,8 +5,8 @@
 
 use super::{ImportOptions, ImportReport};
 use crate::error::{Error, InputError};
-use crate::geometry::mesh_io::write_obj;
 use crate::geometry::Mesh;
+use crate::geometry::mesh_io::write_obj;
 use crate::scene::format::StructureEntry;
 use std::path::{Path, PathBuf};
 

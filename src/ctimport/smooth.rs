@@ -31,8 +31,7 @@ pub fn taubin(mesh: &mut Mesh, iterations: usize) {
             if list.is_empty() {
                 continue;
             }
-            let mean =
-                list.iter().map(|&j| old[j as usize]).sum::<DVec3>() / list.len() as f64;
+            let mean = list.iter().map(|&j| old[j as usize]).sum::<DVec3>() / list.len() as f64;
             v[i] = old[i] + factor * (mean - old[i]);
         }
     };
@@ -96,8 +95,34 @@ pub fn without_folded_pairs(faces: Vec<[u32; 3]>) -> Vec<[u32; 3]> {
     for f in &faces {
         *count.entry(key(f)).or_insert(0) += 1;
     }
-    faces
-        .into_iter()
-        .filter(|f| count[&key(f)] == 1)
-        .collect()
+    faces.into_iter().filter(|f| count[&key(f)] == 1).collect()
+}
+
+/// The uniform offset along vertex normals that gives the mesh `target_mm3`: ΔV ≈ area · δ.
+pub fn volume_restoring_offset(mesh: &Mesh, target_mm3: f64) -> f64 {
+    let area: f64 = mesh
+        .faces
+        .iter()
+        .map(|f| {
+            let [a, b, c] = f.map(|v| mesh.vertices[v as usize]);
+            0.5 * (b - a).cross(c - a).length()
+        })
+        .sum();
+    if area <= 0.0 {
+        return 0.0;
+    }
+    (target_mm3 - mesh.signed_volume()) / area
+}
+
+/// Every vertex moved by `offset_mm` along its (area-weighted) normal.
+pub fn offset_along_normals(mesh: &Mesh, offset_mm: f64) -> Mesh {
+    let normals = mesh.vertex_normals();
+    Mesh::new(
+        mesh.vertices
+            .iter()
+            .zip(&normals)
+            .map(|(&v, &n)| v + n * offset_mm)
+            .collect(),
+        mesh.faces.clone(),
+    )
 }

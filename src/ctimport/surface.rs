@@ -80,7 +80,9 @@ pub fn largest_piece(mesh: &Mesh) -> Mesh {
             .entry(find(&mut parent, f[0] as usize))
             .or_insert(0) += 1;
     }
-    let Some((&root, _)) = faces_per_root.iter().max_by_key(|(r, c)| (**c, usize::MAX - **r))
+    let Some((&root, _)) = faces_per_root
+        .iter()
+        .max_by_key(|(r, c)| (**c, usize::MAX - **r))
     else {
         return Mesh::default();
     };
@@ -187,7 +189,9 @@ pub fn self_intersections(mesh: &Mesh) -> usize {
         for z in l.2..=h.2 {
             for y in l.1..=h.1 {
                 for x in l.0..=h.0 {
-                    grid.entry(x + gx * (y + gy * z)).or_default().push(n as u32);
+                    grid.entry(x + gx * (y + gy * z))
+                        .or_default()
+                        .push(n as u32);
                 }
             }
         }
@@ -237,4 +241,72 @@ fn segment_hits_triangle(p: DVec3, q: DVec3, t: &[DVec3; 3]) -> bool {
     }
     let along = inv * e2.dot(qv);
     along > 1e-9 && along < 1.0 - 1e-9
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ctimport::volume::WorldTransform;
+    use glam::DMat3;
+
+    fn ball(radius_vox: f64, spacing: DVec3) -> (Mask, LabelVolume) {
+        let n = (2.0 * radius_vox) as usize + 6;
+        let mut m = Mask::new([n; 3], [0; 3]);
+        let c = DVec3::splat(n as f64 / 2.0);
+        for k in 0..n {
+            for j in 0..n {
+                for i in 0..n {
+                    let p = DVec3::new(i as f64, j as f64, k as f64) - c;
+                    let idx = m.index(i, j, k);
+                    m.data[idx] = p.length() <= radius_vox;
+                }
+            }
+        }
+        let vol = LabelVolume {
+            dims: [n; 3],
+            labels: Vec::new(),
+            linear: DMat3::from_diagonal(spacing),
+            offset_mm: DVec3::ZERO,
+            transform: WorldTransform::Pixdim,
+            datatype: String::new(),
+        };
+        (m, vol)
+    }
+
+    #[test]
+    fn a_voxel_ball_gives_a_closed_outward_surface_of_its_volume() {
+        let (mut m, vol) = ball(9.0, DVec3::new(0.8, 0.8, 2.0));
+        let voxels = m.count() as f64 * vol.voxel_volume_mm3();
+        crate::ctimport::mask::make_well_composed(&mut m);
+        let mesh = extract(&m, &vol);
+        let t = topology(&mesh);
+        assert!(t.is_closed_manifold(), "{t:?}");
+        assert_eq!(t.euler_characteristic, 2);
+        assert_eq!(self_intersections(&mesh), 0);
+        let v = mesh.signed_volume();
+        assert!(
+            v > 0.0 && (v / voxels - 1.0).abs() < 0.03,
+            "{v} vs {voxels}"
+        );
+    }
+
+    #[test]
+    fn crossing_faces_are_found() {
+        // Two triangles through each other, and one far away.
+        let v = vec![
+            DVec3::new(0.0, 0.0, 0.0),
+            DVec3::new(2.0, 0.0, 0.0),
+            DVec3::new(0.0, 2.0, 0.0),
+            DVec3::new(0.5, 0.5, -1.0),
+            DVec3::new(0.5, 0.5, 1.0),
+            DVec3::new(1.5, 1.5, 0.5),
+            DVec3::new(9.0, 9.0, 9.0),
+            DVec3::new(10.0, 9.0, 9.0),
+            DVec3::new(9.0, 10.0, 9.0),
+        ];
+        let crossing = Mesh::new(v.clone(), vec![[0, 1, 2], [3, 4, 5]]);
+        assert_eq!(self_intersections(&crossing), 1);
+        let apart = Mesh::new(v, vec![[0, 1, 2], [6, 7, 8]]);
+        assert_eq!(self_intersections(&apart), 0);
+    }
 }

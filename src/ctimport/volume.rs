@@ -41,11 +41,17 @@ pub enum VolumeError {
     NotGzip,
     #[error("a {0}-dimensional volume: a label map has 3 dimensions (a 4th of size 1 is allowed)")]
     Dimensions(usize),
-    #[error("datatype {0} cannot hold labels (uint8, int8, uint16, int16, int32, uint32, float32 or float64)")]
+    #[error(
+        "datatype {0} cannot hold labels (uint8, int8, uint16, int16, int32, uint32, float32 or float64)"
+    )]
     Datatype(String),
-    #[error("{count} voxels are not whole non-negative labels (e.g. {example}); is this a CT intensity image rather than a label map?")]
+    #[error(
+        "{count} voxels are not whole non-negative labels (e.g. {example}); is this a CT intensity image rather than a label map?"
+    )]
     NotLabels { count: usize, example: f64 },
-    #[error("the voxel-to-world transform is degenerate (determinant {0:e}); check sform/qform/pixdim")]
+    #[error(
+        "the voxel-to-world transform is degenerate (determinant {0:e}); check sform/qform/pixdim"
+    )]
     Transform(f64),
     #[error("the volume is empty (a dimension of size 0)")]
     Empty,
@@ -153,7 +159,11 @@ fn decode_labels(
     let word = |b: &[u8]| -> u64 {
         let mut v = 0u64;
         for (n, &x) in b.iter().enumerate() {
-            let shift = if big_endian { (b.len() - 1 - n) * 8 } else { n * 8 };
+            let shift = if big_endian {
+                (b.len() - 1 - n) * 8
+            } else {
+                n * 8
+            };
             v |= (x as u64) << shift;
         }
         v
@@ -225,11 +235,7 @@ fn world_map(h: &nifti::NiftiHeader) -> (DMat3, DVec3, WorldTransform) {
     } * u;
     let spacing = DMat3::from_diagonal(DVec3::new(pix(1), pix(2), pix(3)));
     if h.qform_code > 0 {
-        let (b, c, d) = (
-            h.quatern_b as f64,
-            h.quatern_c as f64,
-            h.quatern_d as f64,
-        );
+        let (b, c, d) = (h.quatern_b as f64, h.quatern_c as f64, h.quatern_d as f64);
         let a = (1.0 - (b * b + c * c + d * d)).max(0.0).sqrt();
         // NIfTI-1 qform rotation (nifti1.h, "METHOD 2").
         let r = DMat3::from_cols(
@@ -251,11 +257,7 @@ fn world_map(h: &nifti::NiftiHeader) -> (DMat3, DVec3, WorldTransform) {
         );
         let qfac = if h.pixdim[0] < 0.0 { -1.0 } else { 1.0 };
         let flip = DMat3::from_diagonal(DVec3::new(1.0, 1.0, qfac));
-        let offset = DVec3::new(
-            h.quatern_x as f64,
-            h.quatern_y as f64,
-            h.quatern_z as f64,
-        ) * u;
+        let offset = DVec3::new(h.quatern_x as f64, h.quatern_y as f64, h.quatern_z as f64) * u;
         let offset = if offset.is_finite() {
             offset
         } else {
@@ -311,7 +313,16 @@ pub fn write(
         h[at..at + b.len()].copy_from_slice(&b);
     };
     put(&mut h, 0, &348i32.to_le_bytes());
-    let dim = [3i16, vol.dims[0] as i16, vol.dims[1] as i16, vol.dims[2] as i16, 1, 1, 1, 1];
+    let dim = [
+        3i16,
+        vol.dims[0] as i16,
+        vol.dims[1] as i16,
+        vol.dims[2] as i16,
+        1,
+        1,
+        1,
+        1,
+    ];
     for (n, d) in dim.iter().enumerate() {
         put(&mut h, 40 + 2 * n, &d.to_le_bytes());
     }
@@ -324,7 +335,16 @@ pub fn write(
     put(&mut h, 70, &code.to_le_bytes());
     put(&mut h, 72, &bitpix.to_le_bytes());
     let s = vol.spacing_mm();
-    let mut pixdim = [1.0f32, s[0] as f32, s[1] as f32, s[2] as f32, 1.0, 1.0, 1.0, 1.0];
+    let mut pixdim = [
+        1.0f32,
+        s[0] as f32,
+        s[1] as f32,
+        s[2] as f32,
+        1.0,
+        1.0,
+        1.0,
+        1.0,
+    ];
     match transform {
         WriteTransform::Qform {
             qfac, spacing_mm, ..
@@ -399,4 +419,78 @@ pub fn write(
         h = enc.finish()?;
     }
     std::fs::write(path, h)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The same grid written with a sform and with the equivalent qform (a rotation and
+    /// qfac = −1) reads back to the same world map, and labels survive each datatype.
+    #[test]
+    fn sform_and_qform_agree_and_labels_round_trip() {
+        let dir = std::env::temp_dir().join(format!("endofuse-nifti-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let rot = glam::DQuat::from_axis_angle(DVec3::new(1.0, 2.0, -0.5).normalize(), 0.7);
+        let r = DMat3::from_quat(rot);
+        let spacing = DVec3::new(0.9, 1.1, 2.5);
+        // qfac = −1 flips k before rotating.
+        let linear = r * DMat3::from_diagonal(DVec3::new(spacing.x, spacing.y, -spacing.z));
+        let offset = DVec3::new(-12.0, 40.0, 7.5);
+        let vol = LabelVolume {
+            dims: [5, 4, 3],
+            labels: (0..60).map(|n| (n % 4) as u16).collect(),
+            linear,
+            offset_mm: offset,
+            transform: WorldTransform::Sform,
+            datatype: String::new(),
+        };
+        let q = if rot.w < 0.0 { -rot } else { rot };
+        let cases = [
+            ("s.nii", WriteTransform::Sform, WriteType::Uint8, false),
+            ("s.nii.gz", WriteTransform::Sform, WriteType::Int16, true),
+            ("f.nii", WriteTransform::Sform, WriteType::Float32, true),
+            (
+                "q.nii.gz",
+                WriteTransform::Qform {
+                    quaternion_bcd: [q.x as f32, q.y as f32, q.z as f32],
+                    qfac: -1.0,
+                    spacing_mm: spacing.to_array().map(|v| v as f32),
+                    offset_mm: offset.to_array().map(|v| v as f32),
+                },
+                WriteType::Uint16,
+                false,
+            ),
+        ];
+        for (name, t, ty, big) in cases {
+            let p = dir.join(name);
+            write(&p, &vol, t, ty, big).unwrap();
+            let back = read(&p).unwrap();
+            assert_eq!(back.labels, vol.labels, "{name}");
+            assert_eq!(back.dims, vol.dims);
+            for ijk in [
+                DVec3::ZERO,
+                DVec3::new(4.0, 3.0, 2.0),
+                DVec3::new(1.0, 0.0, 2.0),
+            ] {
+                let d = (back.world(ijk) - vol.world(ijk)).length();
+                assert!(d < 1e-4, "{name}: voxel {ijk} is {d} mm off");
+            }
+        }
+        let p = dir.join("p.nii");
+        write(
+            &p,
+            &vol,
+            WriteTransform::Pixdim {
+                spacing_mm: [0.5, 0.6, 0.7],
+            },
+            WriteType::Uint8,
+            false,
+        )
+        .unwrap();
+        let back = read(&p).unwrap();
+        assert_eq!(back.transform, WorldTransform::Pixdim);
+        assert!((back.voxel_volume_mm3() - 0.5 * 0.6 * 0.7).abs() < 1e-6);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }

@@ -404,7 +404,11 @@ impl Scene {
                     paths.push(root.join(l.expand(t, &cam.name, "")));
                 }
                 if let Some(h) = &gt.hidden {
-                    paths.extend(hidden.iter().map(|s| root.join(h.expand(t, &cam.name, &s.name))));
+                    paths.extend(
+                        hidden
+                            .iter()
+                            .map(|s| root.join(h.expand(t, &cam.name, &s.name))),
+                    );
                 }
                 for path in paths.iter().filter(|p| p.exists()) {
                     frames::check_image_header(path, size, "ground-truth label image")?;
