@@ -40,7 +40,7 @@ fn identity() -> [[f64; 3]; 3] {
 #[serde(deny_unknown_fields)]
 pub struct CameraEntry {
     pub name: String,
-    pub frames: String,
+    pub frames: FramesEntry,
     pub width: i64,
     pub height: i64,
     pub fx: f64,
@@ -62,6 +62,85 @@ pub struct CameraEntry {
     pub rotation: [[f64; 3]; 3],
     #[serde(default)]
     pub translation: [f64; 3],
+}
+
+/// Where a camera's frames are (CONTRACT §2): a path template with `{frame}` (an image
+/// sequence), the path of a video file, or one view of a side-by-side stereo video.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+#[serde(untagged)]
+pub enum FramesEntry {
+    Path(String),
+    Video {
+        video: String,
+        /// `[x, y, width, height]` of the view in the video's frames, pixels.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        crop: Option<[i64; 4]>,
+    },
+}
+
+impl From<String> for FramesEntry {
+    fn from(s: String) -> Self {
+        FramesEntry::Path(s)
+    }
+}
+
+impl<'de> Deserialize<'de> for FramesEntry {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        use serde::de::Error;
+        const WHAT: &str = "'frames' must be a path template like \"left/{frame:06}.png\", a video file, or {\"video\": FILE, \"crop\": [x, y, width, height]}";
+        match serde_json::Value::deserialize(d)? {
+            serde_json::Value::String(s) => Ok(FramesEntry::Path(s)),
+            serde_json::Value::Object(map) => {
+                if let Some(k) = map.keys().find(|k| *k != "video" && *k != "crop") {
+                    return Err(D::Error::custom(format!(
+                        "unknown key '{k}' in frames: {WHAT}"
+                    )));
+                }
+                let video = map
+                    .get("video")
+                    .and_then(|v| v.as_str())
+                    .ok_or_else(|| D::Error::custom(WHAT))?
+                    .to_string();
+                let crop = match map.get("crop") {
+                    None | Some(serde_json::Value::Null) => None,
+                    Some(c) => {
+                        Some(serde_json::from_value::<[i64; 4]>(c.clone()).map_err(|_| {
+                            D::Error::custom(
+                                "frames.crop must be 4 whole numbers [x, y, width, height]",
+                            )
+                        })?)
+                    }
+                };
+                Ok(FramesEntry::Video { video, crop })
+            }
+            _ => Err(D::Error::custom(WHAT)),
+        }
+    }
+}
+
+impl CameraEntry {
+    /// The scene.json entry of a camera whose frames are `frames`.
+    pub fn from_camera(c: &crate::geometry::Camera, frames: FramesEntry) -> Self {
+        let i = &c.intrinsics;
+        let r = c.extrinsics.rotation;
+        CameraEntry {
+            name: c.name.clone(),
+            frames,
+            width: c.width as i64,
+            height: c.height as i64,
+            fx: i.fx,
+            fy: i.fy,
+            cx: i.cx,
+            cy: i.cy,
+            k1: i.k1,
+            k2: i.k2,
+            p1: i.p1,
+            p2: i.p2,
+            k3: i.k3,
+            rotation: [0, 1, 2].map(|row| [r.x_axis[row], r.y_axis[row], r.z_axis[row]]),
+            translation: c.extrinsics.translation_mm.to_array(),
+        }
+    }
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]

@@ -1,8 +1,11 @@
 //! Video frames of each camera: image sequences on disk (PNG, JPEG) behind a bounded cache of
-//! decoded frames, or frames held in memory (the built-in demo). Shared between threads.
+//! decoded frames, a video file (or one view of a side-by-side video) read by
+//! [`crate::video::VideoReader`] with its own cache and decode-ahead, or frames held in memory
+//! (the built-in demo). Shared between threads.
 
 use super::template::PathTemplate;
 use crate::error::InputError;
+use crate::video::{Crop, VideoError, VideoReader};
 use image::RgbImage;
 use std::collections::{HashMap, VecDeque};
 use std::path::{Path, PathBuf};
@@ -13,14 +16,42 @@ use std::sync::{Arc, Mutex};
 pub const DEFAULT_CACHE_FRAMES: usize = 128;
 
 /// Where one camera's frames come from.
-#[derive(Debug, Clone)]
+#[derive(Clone)]
 pub enum FrameSource {
     Files {
         root: PathBuf,
         template: PathTemplate,
         camera: String,
     },
+    /// A video file; cameras of one side-by-side video share its reader.
+    Video {
+        reader: Arc<VideoReader>,
+        crop: Option<Crop>,
+    },
     Memory(Arc<Vec<Arc<RgbImage>>>),
+}
+
+impl std::fmt::Debug for FrameSource {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Files { root, template, .. } => {
+                write!(f, "Files({}, {template:?})", root.display())
+            }
+            Self::Video { reader, crop } => {
+                write!(f, "Video({}, {crop:?})", reader.path().display())
+            }
+            Self::Memory(frames) => write!(f, "Memory({} frames)", frames.len()),
+        }
+    }
+}
+
+/// A video error as the one-line input error the scene reports (the path once).
+pub fn video_input_error(e: VideoError) -> InputError {
+    let path = e.path().to_path_buf();
+    let text = e.to_string();
+    let prefix = format!("{}: ", path.display());
+    let problem = text.strip_prefix(&prefix).unwrap_or(&text).to_string();
+    InputError::new(path, problem)
 }
 
 impl FrameSource {
@@ -32,8 +63,69 @@ impl FrameSource {
                 template,
                 camera,
             } => Some(root.join(template.expand(t, camera, ""))),
-            Self::Memory(_) => None,
+            Self::Video { .. } | Self::Memory(_) => None,
         }
+    }
+}
+
+/// The video readers of one scene, one per file: the two views of a side-by-side video share
+/// one decoder.
+#[derive(Default)]
+pub struct VideoReaders {
+    open: Vec<(PathBuf, Arc<VideoReader>)>,
+}
+
+impl VideoReaders {
+    /// The frame source of `camera` from `path` (cropped), after checking the video against the
+    /// camera: its size (or the crop's fit) and that it has the scene's frames.
+    pub fn source(
+        &mut self,
+        path: &Path,
+        crop: Option<Crop>,
+        camera: &crate::geometry::Camera,
+        frame_count: usize,
+    ) -> Result<FrameSource, InputError> {
+        let reader = match self.open.iter().find(|(p, _)| p == path) {
+            Some((_, r)) => r.clone(),
+            None => {
+                let r = Arc::new(VideoReader::open(path).map_err(video_input_error)?);
+                self.open.push((path.to_path_buf(), r.clone()));
+                r
+            }
+        };
+        let info = reader.info();
+        let (w, h) = (info.width, info.height);
+        match crop {
+            None if (w, h) != (camera.width, camera.height) => {
+                return Err(InputError::new(
+                    path,
+                    format!(
+                        "video is {w}×{h} but camera '{}' is {}×{} (one view of a side-by-side video needs \"crop\")",
+                        camera.name, camera.width, camera.height
+                    ),
+                ));
+            }
+            Some(c) if c.x + c.width > w || c.y + c.height > h => {
+                return Err(InputError::new(
+                    path,
+                    format!(
+                        "camera '{}': crop {}×{} at ({}, {}) does not fit the {w}×{h} video",
+                        camera.name, c.width, c.height, c.x, c.y
+                    ),
+                ));
+            }
+            _ => {}
+        }
+        if info.frame_count < frame_count {
+            return Err(InputError::new(
+                path,
+                format!(
+                    "video has {} frames but the scene's frame_count is {frame_count}",
+                    info.frame_count
+                ),
+            ));
+        }
+        Ok(FrameSource::Video { reader, crop })
     }
 }
 
@@ -72,6 +164,14 @@ impl FrameCache {
                     .get(t)
                     .cloned()
                     .ok_or_else(|| InputError::new("demo", format!("frame {t} does not exist")));
+            }
+            FrameSource::Video { reader, crop } => {
+                // The reader caches and decodes ahead itself.
+                return match crop {
+                    None => reader.frame(t),
+                    Some(c) => reader.frame_cropped(t, *c).map(Arc::new),
+                }
+                .map_err(video_input_error);
             }
             FrameSource::Files { .. } => source.path(t).unwrap_or_default(),
         };

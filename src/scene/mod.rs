@@ -27,6 +27,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use template::PathTemplate;
 pub use trajectory::{Trajectory, TrajectoryError, TrajectoryFrame};
+pub use validate::FramesSpec;
 pub use validate::{AffineError, validate_affine};
 use validate::{check_name, load_catalog, validate_camera};
 
@@ -167,15 +168,21 @@ impl Scene {
         }
         let mut cameras = Vec::new();
         let mut frame_sources = Vec::new();
+        let mut videos = frames::VideoReaders::default();
         for (i, c) in file.cameras.iter().enumerate() {
-            let (camera, template) = validate_camera(c, i).map_err(|e| bad(e.to_string()))?;
+            let (camera, spec) = validate_camera(c, i).map_err(|e| bad(e.to_string()))?;
             if cameras.iter().any(|k: &Camera| k.name == camera.name) {
                 return Err(bad(format!("two cameras are named '{}'", camera.name)));
             }
-            frame_sources.push(FrameSource::Files {
-                root: root.to_path_buf(),
-                template,
-                camera: camera.name.clone(),
+            frame_sources.push(match spec {
+                FramesSpec::Sequence(template) => FrameSource::Files {
+                    root: root.to_path_buf(),
+                    template,
+                    camera: camera.name.clone(),
+                },
+                FramesSpec::Video { path, crop } => {
+                    videos.source(&root.join(path), crop, &camera, frame_count)?
+                }
             });
             cameras.push(camera);
         }
@@ -436,8 +443,16 @@ impl Scene {
         let total = self.cameras.len() * self.frame_count;
         for (c, cam) in self.cameras.iter().enumerate() {
             for t in 0..self.frame_count {
-                if let Some(path) = self.frame_sources[c].path(t) {
-                    frames::decode_frame(&path, (cam.width, cam.height))?;
+                match &self.frame_sources[c] {
+                    FrameSource::Files { .. } => {
+                        if let Some(path) = self.frame_sources[c].path(t) {
+                            frames::decode_frame(&path, (cam.width, cam.height))?;
+                        }
+                    }
+                    FrameSource::Video { .. } => {
+                        self.frame(c, t)?;
+                    }
+                    FrameSource::Memory(_) => {}
                 }
                 progress(c * self.frame_count + t + 1, total);
             }

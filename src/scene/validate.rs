@@ -3,7 +3,7 @@
 //! catalog folders. Each check has its own error type carrying the offending values; the
 //! scene turns them into one-line [`InputError`]s naming scene.json (or the catalog file).
 
-use super::format::CameraEntry;
+use super::format::{CameraEntry, FramesEntry};
 use super::template::{PathTemplate, TemplateError};
 use crate::error::InputError;
 use crate::geometry::camera::IntrinsicsError;
@@ -47,9 +47,20 @@ pub enum CameraProblem {
     NonFiniteTranslation,
     #[error("frames: {0}")]
     Frames(#[source] TemplateError),
-    /// `template` as written: a camera needs one file per frame.
-    #[error("frames template '{template}' has no {{frame}} placeholder")]
+    /// `template` as written: a camera needs one file per frame, or a video.
+    #[error(
+        "frames '{template}' has no {{frame}} placeholder and is not a video file (.mp4, .mov, .avi, .mkv, .m4v, .webm)"
+    )]
     NoFramePlaceholder { template: String },
+    #[error("frames.crop {crop:?} needs a positive width and height and a non-negative corner")]
+    Crop { crop: [i64; 4] },
+    #[error("frames.crop is {crop_w}×{crop_h} but the camera is {width}×{height}")]
+    CropSize {
+        crop_w: i64,
+        crop_h: i64,
+        width: i64,
+        height: i64,
+    },
 }
 
 /// An `affine` (q1…q12 of eq. 2) the fit cannot start from.
@@ -82,11 +93,23 @@ pub(super) fn check_name(name: &str) -> Result<(), NameError> {
     Ok(())
 }
 
-/// The camera entry `index` of scene.json as a [`Camera`] and its frames template.
+/// Where a camera's frames come from, as scene.json says it.
+#[derive(Debug, Clone, PartialEq)]
+pub enum FramesSpec {
+    Sequence(PathTemplate),
+    /// A video file (relative to scene.json) and, for one view of a side-by-side video, the
+    /// rectangle of that view.
+    Video {
+        path: String,
+        crop: Option<crate::video::Crop>,
+    },
+}
+
+/// The camera entry `index` of scene.json as a [`Camera`] and its frames.
 pub(super) fn validate_camera(
     c: &CameraEntry,
     index: usize,
-) -> Result<(Camera, PathTemplate), CameraError> {
+) -> Result<(Camera, FramesSpec), CameraError> {
     let bad = |problem: CameraProblem| CameraError {
         index,
         name: c.name.clone(),
@@ -125,12 +148,51 @@ pub(super) fn validate_camera(
     if !t.is_finite() {
         return Err(bad(CameraProblem::NonFiniteTranslation));
     }
-    let template = PathTemplate::parse(&c.frames).map_err(|e| bad(CameraProblem::Frames(e)))?;
-    if !template.uses_frame() {
-        return Err(bad(CameraProblem::NoFramePlaceholder {
-            template: c.frames.clone(),
-        }));
-    }
+    let frames = match &c.frames {
+        FramesEntry::Path(p) => {
+            let template = PathTemplate::parse(p).map_err(|e| bad(CameraProblem::Frames(e)))?;
+            if template.uses_frame() {
+                FramesSpec::Sequence(template)
+            } else if crate::video::is_video_path(Path::new(p)) {
+                FramesSpec::Video {
+                    path: p.clone(),
+                    crop: None,
+                }
+            } else {
+                return Err(bad(CameraProblem::NoFramePlaceholder {
+                    template: p.clone(),
+                }));
+            }
+        }
+        FramesEntry::Video { video, crop } => {
+            let crop = match *crop {
+                None => None,
+                Some([x, y, w, h]) => {
+                    if x < 0 || y < 0 || w <= 0 || h <= 0 || x.max(y).max(w).max(h) > 65536 {
+                        return Err(bad(CameraProblem::Crop { crop: [x, y, w, h] }));
+                    }
+                    if (w, h) != (c.width, c.height) {
+                        return Err(bad(CameraProblem::CropSize {
+                            crop_w: w,
+                            crop_h: h,
+                            width: c.width,
+                            height: c.height,
+                        }));
+                    }
+                    Some(crate::video::Crop {
+                        x: x as u32,
+                        y: y as u32,
+                        width: w as u32,
+                        height: h as u32,
+                    })
+                }
+            };
+            FramesSpec::Video {
+                path: video.clone(),
+                crop,
+            }
+        }
+    };
     Ok((
         Camera {
             name: c.name.clone(),
@@ -142,7 +204,7 @@ pub(super) fn validate_camera(
                 translation_mm: t,
             },
         },
-        template,
+        frames,
     ))
 }
 

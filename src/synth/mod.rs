@@ -186,27 +186,7 @@ pub fn write_scene(
         frame_count: options.frames as i64,
         cameras: cams0
             .iter()
-            .map(|c| {
-                let i = &c.intrinsics;
-                let r = c.extrinsics.rotation;
-                CameraEntry {
-                    name: c.name.clone(),
-                    frames: format!("{}/{{frame:06}}.png", c.name),
-                    width: c.width as i64,
-                    height: c.height as i64,
-                    fx: i.fx,
-                    fy: i.fy,
-                    cx: i.cx,
-                    cy: i.cy,
-                    k1: i.k1,
-                    k2: i.k2,
-                    p1: i.p1,
-                    p2: i.p2,
-                    k3: i.k3,
-                    rotation: [0, 1, 2].map(|row| [r.x_axis[row], r.y_axis[row], r.z_axis[row]]),
-                    translation: c.extrinsics.translation_mm.to_array(),
-                }
-            })
+            .map(|c| CameraEntry::from_camera(c, format!("{}/{{frame:06}}.png", c.name).into()))
             .collect(),
         structures: phantom
             .structures
