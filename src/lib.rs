@@ -13,6 +13,7 @@ pub mod export;
 pub mod fit;
 pub mod geometry;
 pub mod info;
+pub mod newscene;
 pub mod open;
 pub mod overlay;
 pub mod plane;

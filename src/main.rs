@@ -106,6 +106,48 @@ enum Command {
         /// No smoke haze.
         #[arg(long)]
         no_smoke: bool,
+        /// Render these structures (an `import-ct` output, or kidney.obj + tumour_*.obj)
+        /// instead of the built-in anatomy.
+        #[arg(long)]
+        meshes: Option<PathBuf>,
+        /// Render through this calibration (OpenCV YAML/XML, EndoVis text, scene.json); its
+        /// image size replaces --width/--height, its cameras --views.
+        #[arg(long)]
+        calib: Option<PathBuf>,
+    },
+    /// Assemble a scene folder from a patient's calibration, CT labels or meshes, and videos.
+    NewScene {
+        #[arg(long)]
+        out: PathBuf,
+        /// Calibration: OpenCV FileStorage YAML/XML, da Vinci/EndoVis camera_calibration.txt,
+        /// or a scene.json's cameras.
+        #[arg(long)]
+        calib: PathBuf,
+        /// CT label volume (NIfTI), meshed as `import-ct` does.
+        #[arg(long, conflicts_with = "meshes", required_unless_present = "meshes")]
+        ct: Option<PathBuf>,
+        /// A folder of meshes (import-ct output, or kidney.obj, tumour_exo*.obj, tumour_endo*.obj).
+        #[arg(long)]
+        meshes: Option<PathBuf>,
+        /// One view per camera: NAME=FILE (a video file or a folder of numbered frames).
+        #[arg(
+            long = "view",
+            value_name = "NAME=FILE",
+            conflicts_with = "side_by_side"
+        )]
+        views: Vec<String>,
+        /// One side-by-side stereo video (left half = camera 0).
+        #[arg(long, value_name = "FILE")]
+        side_by_side: Option<PathBuf>,
+        /// Copy videos/frames into the scene instead of referring to them.
+        #[arg(long)]
+        copy_frames: bool,
+        /// Use only the first N frames.
+        #[arg(long)]
+        frames: Option<usize>,
+        /// Replace a non-empty output folder.
+        #[arg(long)]
+        force: bool,
     },
 }
 
@@ -296,6 +338,67 @@ fn run(cli: Cli) -> Result<()> {
             );
             Ok(())
         }
+        Some(Command::NewScene {
+            out,
+            calib,
+            ct,
+            meshes,
+            views,
+            side_by_side,
+            copy_frames,
+            frames,
+            force,
+        }) => {
+            use endofuse::newscene::{Anatomy, NewSceneOptions, Views};
+            let anatomy = match (ct, meshes) {
+                (Some(labels), _) => Anatomy::Ct {
+                    labels,
+                    options: Default::default(),
+                },
+                (None, Some(dir)) => Anatomy::Meshes(dir),
+                (None, None) => {
+                    return Err(endofuse::InputError::new(
+                        "--ct",
+                        "give --ct LABELS or --meshes DIR",
+                    )
+                    .into());
+                }
+            };
+            let views = match side_by_side {
+                Some(file) => Views::SideBySide(file),
+                None => {
+                    if views.is_empty() {
+                        return Err(endofuse::InputError::new(
+                            "--view",
+                            "give one --view NAME=FILE per camera, or --side-by-side FILE",
+                        )
+                        .into());
+                    }
+                    let mut list = Vec::new();
+                    for v in &views {
+                        let (name, file) = v.split_once('=').ok_or_else(|| {
+                            endofuse::InputError::new("--view", format!("'{v}' is not NAME=FILE"))
+                        })?;
+                        list.push((name.to_string(), PathBuf::from(file)));
+                    }
+                    Views::PerCamera(list)
+                }
+            };
+            let report = endofuse::newscene::new_scene(
+                &NewSceneOptions {
+                    out,
+                    calib,
+                    anatomy,
+                    views,
+                    copy_frames,
+                    frames,
+                    force,
+                },
+                &|stage| eprintln!("new-scene: {stage}"),
+            )?;
+            println!("{}", report.next_steps());
+            Ok(())
+        }
         Some(Command::Synth {
             out,
             frames,
@@ -307,8 +410,33 @@ fn run(cli: Cli) -> Result<()> {
             no_tools,
             no_zoom,
             no_smoke,
+            meshes,
+            calib,
         }) => {
+            let structures = match &meshes {
+                Some(dir) => Some(
+                    endofuse::ctimport::output::read_structures_dir(dir)?
+                        .into_iter()
+                        .map(|s| (s.entry.name, s.entry.label as u8, s.entry.visible, s.mesh))
+                        .collect(),
+                ),
+                None => None,
+            };
+            let (cameras, width, height, views) = match &calib {
+                Some(file) => {
+                    let cal = endofuse::calib::read(file)?;
+                    let (w, h) = cal.image_size.unwrap_or((width, height));
+                    let cams = cal
+                        .cameras(w, h)
+                        .map_err(|e| endofuse::InputError::new(file, e.to_string()))?;
+                    let n = cams.len();
+                    (Some(cams), w, h, n)
+                }
+                None => (None, width, height, views),
+            };
             let options = SynthOptions {
+                structures,
+                cameras,
                 frames,
                 seed,
                 noise,

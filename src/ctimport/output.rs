@@ -91,7 +91,8 @@ pub fn write(out: &Path, report: &ImportReport, options: &ImportOptions) -> Resu
     }
 }
 
-fn write_into(dir: &Path, report: &ImportReport, options: &ImportOptions) -> Result<(), Error> {
+/// Writes the meshes, catalogs, structures.json and ct.json into `dir` (which exists).
+pub fn write_into(dir: &Path, report: &ImportReport, options: &ImportOptions) -> Result<(), Error> {
     let w = |path: PathBuf| move |source| Error::Write { path, source };
     let meshes_dir = dir.join("meshes");
     std::fs::create_dir_all(&meshes_dir).map_err(w(meshes_dir.clone()))?;
@@ -123,4 +124,95 @@ fn write_into(dir: &Path, report: &ImportReport, options: &ImportOptions) -> Res
     let text = serde_json::to_string_pretty(report).unwrap_or_default();
     std::fs::write(&p, text + "\n").map_err(w(p.clone()))?;
     Ok(())
+}
+
+/// One structure of a meshes folder (`import-ct`'s output, or meshes a user made).
+#[derive(Debug, Clone)]
+pub struct FolderStructure {
+    pub entry: StructureEntry,
+    pub mesh: Mesh,
+    /// The mesh file and its catalog folder, if any, as found.
+    pub mesh_path: PathBuf,
+    pub catalog_path: Option<PathBuf>,
+}
+
+/// Reads a folder of structures: `DIR/structures.json` as `import-ct` writes it (paths relative
+/// to DIR), else `kidney.obj` (or .stl/.ply), `tumour_exo*.obj` (visible) and `tumour_endo*.obj`
+/// (hidden), in `DIR` or `DIR/meshes`, each with its `NAME_catalog/` folder when there is one.
+pub fn read_structures_dir(dir: &Path) -> Result<Vec<FolderStructure>, InputError> {
+    let listed = dir.join("structures.json");
+    if listed.is_file() {
+        let text = crate::error::read_text(&listed)
+            .map_err(|e| InputError::new(&listed, format!("cannot read: {e}")))?;
+        let entries: Vec<StructureEntry> = serde_json::from_str(&text)
+            .map_err(|e| InputError::new(&listed, format!("malformed structures list: {e}")))?;
+        if entries.is_empty() {
+            return Err(InputError::new(&listed, "lists no structures"));
+        }
+        return entries
+            .into_iter()
+            .map(|entry| {
+                let mesh_path = dir.join(&entry.mesh);
+                let mesh = crate::geometry::mesh_io::load_mesh(&mesh_path)?;
+                let catalog_path = entry.catalog.as_ref().map(|c| dir.join(c));
+                Ok(FolderStructure {
+                    entry,
+                    mesh,
+                    mesh_path,
+                    catalog_path,
+                })
+            })
+            .collect();
+    }
+    let base = if dir.join("meshes").is_dir() {
+        dir.join("meshes")
+    } else {
+        dir.to_path_buf()
+    };
+    let files = std::fs::read_dir(&base)
+        .map_err(|e| InputError::new(&base, format!("cannot read the meshes folder: {e}")))?;
+    let mut found: Vec<(String, PathBuf)> = files
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.is_file())
+        .filter_map(|p| {
+            let ext = p.extension()?.to_str()?.to_ascii_lowercase();
+            let stem = p.file_stem()?.to_str()?.to_string();
+            matches!(ext.as_str(), "obj" | "stl" | "ply").then_some((stem, p))
+        })
+        .filter(|(stem, _)| {
+            stem == "kidney" || stem.starts_with("tumour_exo") || stem.starts_with("tumour_endo")
+        })
+        .collect();
+    // Kidney first, then the tumours by name.
+    found.sort_by_key(|(stem, _)| (stem != "kidney", stem.clone()));
+    if found.first().is_none_or(|(s, _)| s != "kidney") {
+        return Err(InputError::new(
+            &base,
+            "no structures.json and no kidney.obj (expected kidney.obj, tumour_exo*.obj, tumour_endo*.obj)",
+        ));
+    }
+    let mut out = Vec::new();
+    for (label, (stem, path)) in (1u8..).zip(found) {
+        let mesh = crate::geometry::mesh_io::load_mesh(&path)?;
+        let cat = base.join(format!("{stem}_catalog"));
+        let catalog_path = cat.is_dir().then_some(cat);
+        let rel = |p: &Path| {
+            p.strip_prefix(dir)
+                .map(|r| r.to_string_lossy().to_string())
+                .unwrap_or_else(|_| p.to_string_lossy().to_string())
+        };
+        out.push(FolderStructure {
+            entry: StructureEntry {
+                name: stem.clone(),
+                label: label as i64,
+                visible: !stem.starts_with("tumour_endo"),
+                mesh: rel(&path),
+                catalog: catalog_path.as_deref().map(rel),
+            },
+            mesh,
+            mesh_path: path,
+            catalog_path,
+        });
+    }
+    Ok(out)
 }

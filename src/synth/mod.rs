@@ -8,6 +8,7 @@ pub mod texture;
 
 use crate::error::{Error, InputError};
 use crate::geometry::mesh_io::write_obj;
+use crate::geometry::{Camera, Mesh};
 use crate::plane::LabelImage;
 use crate::rng::Rng;
 use crate::scene::format::{
@@ -40,6 +41,13 @@ pub struct SynthOptions {
     /// How far `initial_pose` is from the truth.
     pub initial_offset_mm: f64,
     pub initial_offset_deg: f64,
+    /// Structures to render instead of the built-in anatomy (a patient's, from `import-ct`):
+    /// name, label, visible, mesh. The kidney comes first; all are re-centred on its vertex mean.
+    pub structures: Option<Vec<(String, u8, bool, Mesh)>>,
+    /// The rig at rest instead of the built-in stereo pair (a real calibration): sizes,
+    /// intrinsics with their distortion, extrinsics. The zoom then scales focal length and
+    /// principal point and keeps the lens's distortion.
+    pub cameras: Option<Vec<Camera>>,
 }
 
 impl Default for SynthOptions {
@@ -57,6 +65,8 @@ impl Default for SynthOptions {
             seeded_frames: 3,
             initial_offset_mm: 5.0,
             initial_offset_deg: 5.0,
+            structures: None,
+            cameras: None,
         }
     }
 }

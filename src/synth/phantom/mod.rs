@@ -47,7 +47,12 @@ struct Tool {
 /// The phantom's fixed parts; frames are rendered on demand.
 pub struct Phantom {
     pub options: SynthOptions,
-    pub structures: Vec<(&'static str, u8, bool, Mesh)>,
+    pub structures: Vec<(String, u8, bool, Mesh)>,
+    /// The rig came from a real calibration: its distortion stays as measured under zoom.
+    calibrated: bool,
+    /// Given meshes keep their own frame (so the scene's meshes are the files given); this
+    /// moves them where the built-in anatomy sits before the phantom's pose applies.
+    mesh_to_model: Affine,
     rest_cameras: Vec<Camera>,
     /// Light position (mm, camera-0 frame) per camera: the endoscope tip for the stereo pair.
     lights: Vec<DVec3>,
@@ -64,7 +69,16 @@ pub struct Phantom {
 impl Phantom {
     pub fn new(options: SynthOptions) -> Self {
         let mut rng = Rng::new(options.seed);
-        let structures = anatomy::default_structures();
+        let (structures, mesh_to_model) = match &options.structures {
+            Some(given) => (given.clone(), facing_transform(given)),
+            None => (
+                anatomy::default_structures()
+                    .into_iter()
+                    .map(|(n, l, v, m)| (n.to_string(), l, v, m))
+                    .collect(),
+                Affine::IDENTITY,
+            ),
+        };
         let (w, h) = (options.width as f64, options.height as f64);
         let f = FOCAL_WIDTHS * w;
         let intr = Intrinsics {
@@ -114,6 +128,13 @@ impl Phantom {
                 extrinsics,
             });
             lights.push(light);
+        }
+        if let Some(given) = options.cameras.clone().filter(|c| !c.is_empty()) {
+            // The light sits between the first two camera centres, as on an endoscope's tip.
+            let centres: Vec<DVec3> = given.iter().map(|c| c.extrinsics.center_mm()).collect();
+            let tip = (centres[0] + centres[centres.len().min(2) - 1]) * 0.5;
+            lights = vec![tip; given.len()];
+            rest_cameras = given;
         }
         // The kidney seen from its anterior side, long axis tilted across the view.
         let base_pose = RigidPose {
@@ -188,6 +209,8 @@ impl Phantom {
         };
         Self {
             background: background_sheet(&mut rng),
+            calibrated: options.cameras.as_ref().is_some_and(|c| !c.is_empty()),
+            mesh_to_model,
             options,
             structures,
             rest_cameras,
@@ -218,6 +241,7 @@ impl Phantom {
             self.wobble(t),
             DVec3::ZERO,
         ))
+        .compose(&self.mesh_to_model)
     }
 
     fn rigid_offset(&self, t: usize) -> DVec3 {
@@ -277,7 +301,9 @@ impl Phantom {
                 i.fy *= 1.0 + (ZOOM_FACTOR - 1.0) * z;
                 i.cx += 10.0 * scale * z;
                 i.cy -= 6.0 * scale * z;
-                i.k1 = k1_for_focal(i.fx, c.width as f64);
+                if !self.calibrated {
+                    i.k1 = k1_for_focal(i.fx, c.width as f64);
+                }
                 c
             })
             .collect()
@@ -305,6 +331,28 @@ impl Phantom {
         let about = Affine::from_linear_translation(rot, c - rot * c + rng.unit_vector() * mm);
         about.compose(&truth)
     }
+}
+
+/// The map that puts given structures where the built-in anatomy sits: the kidney's vertex mean
+/// at the origin, and the largest visible tumour turned towards the cameras (−z), as a surgeon
+/// exposes it — a patient's tumour on the far side would leave nothing to segment.
+fn facing_transform(given: &[(String, u8, bool, Mesh)]) -> Affine {
+    let centre = given
+        .first()
+        .map(|s| s.3.vertex_mean())
+        .unwrap_or(DVec3::ZERO);
+    let facing = given
+        .iter()
+        .skip(1)
+        .filter(|s| s.2)
+        .max_by_key(|s| s.3.vertices.len())
+        .map(|s| (s.3.vertex_mean() - centre).normalize_or_zero())
+        .filter(|d| *d != DVec3::ZERO);
+    let turn = match facing {
+        Some(d) => DMat3::from_quat(glam::DQuat::from_rotation_arc(d, DVec3::NEG_Z)),
+        None => DMat3::IDENTITY,
+    };
+    Affine::from_linear_translation(turn, -(turn * centre))
 }
 
 /// The retroperitoneal backdrop: a wide bumpy sheet 40–60 mm behind the kidney.
