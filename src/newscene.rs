@@ -17,7 +17,7 @@ use crate::video;
 use std::path::{Path, PathBuf};
 
 /// Where the anatomy comes from.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 pub enum Anatomy {
     Ct {
         labels: PathBuf,
@@ -27,7 +27,7 @@ pub enum Anatomy {
 }
 
 /// Where the frames come from.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 pub enum Views {
     /// One video file or image folder per camera, in the calibration's camera order.
     PerCamera(Vec<(String, PathBuf)>),
@@ -35,7 +35,7 @@ pub enum Views {
     SideBySide(PathBuf),
 }
 
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct NewSceneOptions {
     pub out: PathBuf,
     pub calib: PathBuf,
@@ -70,8 +70,8 @@ impl NewSceneReport {
             .collect();
         format!(
             "new-scene: {} — {} cameras ({}) at {}×{}, {} frames at {:.2} fps; structures: {}\n\
-             next: open it with `endofuse open {}`, paint kidney, tumour and background strokes on \
-             the first frames (B brush, E eraser, 1–9 pick a class), then press Track",
+             next: open it with `endofuse open {}`, paint background (key 1) and structure (2, 3, …) \
+             strokes on the first frames (B brush, E eraser), train the forest (T), then track (Ctrl+T)",
             self.scene_json.display(),
             self.cameras.len(),
             self.cameras.join(", "),

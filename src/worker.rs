@@ -43,6 +43,8 @@ pub enum Command {
     },
     /// Write tracked frames as `endofuse track` does (File → Export).
     Export(Box<crate::export::ExportJob>),
+    /// Assemble a scene folder from a patient's files (File → New scene).
+    NewScene(Box<crate::newscene::NewSceneOptions>),
     Shutdown,
 }
 
@@ -55,6 +57,7 @@ pub enum Task {
     Initialise,
     Track,
     Export,
+    NewScene,
 }
 
 /// What the worker tells the UI.
@@ -81,6 +84,15 @@ pub enum Event {
     Dice {
         frame: usize,
         dice: Vec<(String, f64)>,
+    },
+    /// What a long job is doing now (a stage without a count: "meshing the kidney").
+    Stage {
+        task: Task,
+        what: String,
+    },
+    /// A new scene folder is ready at `scene_json`.
+    SceneCreated {
+        scene_json: std::path::PathBuf,
     },
     Finished(Task),
     Cancelled(Task),
@@ -225,6 +237,7 @@ fn task_of(c: &Command) -> Task {
         Command::Initialise { .. } => Task::Initialise,
         Command::Track { .. } => Task::Track,
         Command::Export(_) | Command::Shutdown => Task::Export,
+        Command::NewScene(_) => Task::NewScene,
     }
 }
 
@@ -385,6 +398,20 @@ fn run(
                 metrics.frames,
                 job.dir.display()
             );
+        }
+        Command::NewScene(options) => {
+            let report = crate::newscene::new_scene(&options, &|stage| {
+                let _ = out.send(Event::Stage {
+                    task: Task::NewScene,
+                    what: format!("New scene: {stage}…"),
+                });
+            })?;
+            emit(
+                out,
+                Event::SceneCreated {
+                    scene_json: report.scene_json,
+                },
+            )?;
         }
         Command::Shutdown => {}
     }

@@ -7,6 +7,7 @@ use egui::{Key, KeyboardShortcut, Modifiers};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Action {
+    NewScene,
     OpenScene,
     OpenDemo,
     SaveSession,
@@ -78,7 +79,8 @@ const fn cmd(k: Key) -> Option<KeyboardShortcut> {
 
 impl Action {
     /// In the order the key handler tries them (Redo before Undo: Ctrl+Shift+Z contains Ctrl+Z).
-    pub const ALL: [Action; 38] = [
+    pub const ALL: [Action; 39] = [
+        Action::NewScene,
         Action::OpenScene,
         Action::OpenDemo,
         Action::SaveSession,
@@ -121,6 +123,7 @@ impl Action {
 
     pub fn label(self) -> &'static str {
         match self {
+            Action::NewScene => "New scene from CT, calibration and videos…",
             Action::OpenScene => "Open scene…",
             Action::OpenDemo => "Open the demo",
             Action::SaveSession => "Save session…",
@@ -156,6 +159,7 @@ impl Action {
 
     pub fn shortcut(self) -> Option<KeyboardShortcut> {
         match self {
+            Action::NewScene => cmd(Key::N),
             Action::OpenScene => cmd(Key::O),
             Action::SaveSession => cmd(Key::S),
             Action::LoadSession => cmd(Key::L),

@@ -47,6 +47,10 @@ pub enum AppCommand {
     Place(Affine),
     DiscardAutosave,
     DismissError,
+    /// Pick a file or folder for a field of the New scene form.
+    BrowseNewScene(crate::app::panels::new_scene::Field),
+    /// Build the scene the New scene form describes (then open it).
+    CreateScene(Box<crate::newscene::NewSceneOptions>),
 }
 
 /// Commands sent during a frame, applied after it.
@@ -146,6 +150,19 @@ impl EndofuseApp {
             }
             AppCommand::DiscardAutosave => self.discard_autosave(),
             AppCommand::DismissError => self.status.error = None,
+            AppCommand::BrowseNewScene(field) => {
+                let picked = if field.is_folder() {
+                    self.files.dialogs.pick_folder(field.label())
+                } else {
+                    self.files
+                        .dialogs
+                        .pick_file(field.label(), field.extensions())
+                };
+                if let (Some(p), Some(form)) = (picked, self.screen.new_scene.as_mut()) {
+                    form.set(field, &p);
+                }
+            }
+            AppCommand::CreateScene(options) => self.create_scene(*options),
         }
     }
 
@@ -157,6 +174,9 @@ impl EndofuseApp {
                 if let Some(p) = self.files.dialogs.pick_scene() {
                     self.open_scene(&p.display().to_string());
                 }
+            }
+            Action::NewScene => {
+                self.screen.new_scene.get_or_insert_with(Default::default);
             }
             Action::OpenDemo => self.open_scene(crate::open::DEMO),
             Action::SaveSession => {

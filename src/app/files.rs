@@ -19,6 +19,10 @@ pub trait Dialogs {
     fn pick_session(&mut self) -> Option<PathBuf>;
     fn save_session(&mut self) -> Option<PathBuf>;
     fn pick_folder(&mut self, title: &str) -> Option<PathBuf>;
+    /// A file to read, titled `title`, offering files ending in `extensions` (and any file).
+    fn pick_file(&mut self, _title: &str, _extensions: &[&str]) -> Option<PathBuf> {
+        None
+    }
 }
 
 /// The native dialogs.
@@ -45,6 +49,13 @@ impl Dialogs for RfdDialogs {
     }
     fn pick_folder(&mut self, title: &str) -> Option<PathBuf> {
         rfd::FileDialog::new().set_title(title).pick_folder()
+    }
+    fn pick_file(&mut self, title: &str, extensions: &[&str]) -> Option<PathBuf> {
+        rfd::FileDialog::new()
+            .set_title(title)
+            .add_filter("expected files", extensions)
+            .add_filter("any file", &["*"])
+            .pick_file()
     }
 }
 
@@ -308,6 +319,18 @@ impl EndofuseApp {
                 .filter(|p| !p.as_os_str().is_empty())
                 .collect()
         });
+        // A CT, a calibration or videos fill the New scene form.
+        if !dropped.is_empty() {
+            let was_open = self.screen.new_scene.is_some();
+            let mut form = self.screen.new_scene.take().unwrap_or_default();
+            let used = form.fill_from_dropped(&dropped);
+            if used || was_open {
+                self.screen.new_scene = Some(form);
+            }
+            if used {
+                return;
+            }
+        }
         if let Some(p) = dropped.first() {
             let is_session = p.is_file()
                 && std::fs::read_to_string(p)

@@ -58,6 +58,13 @@ impl EndofuseApp {
         }
     }
 
+    /// Asks the worker to build a new scene folder (File → New scene); it opens when built.
+    pub fn create_scene(&mut self, options: crate::newscene::NewSceneOptions) {
+        self.status
+            .busy_with(Task::NewScene, "Creating the scene…".into(), 0);
+        self.send_job(Command::NewScene(Box::new(options)));
+    }
+
     /// Asks the worker to load a scene; the current one stays until the new one arrives.
     pub fn open_scene(&mut self, spec: &str) {
         self.jobs.loading_spec = Some(spec.to_string());
@@ -330,6 +337,21 @@ impl EndofuseApp {
                     self.doc.touch();
                 }
             }
+            Event::Stage { task, what } => {
+                if let Some(b) = &mut self.status.busy
+                    && b.task == task
+                {
+                    b.what = what;
+                }
+            }
+            Event::SceneCreated { scene_json } => {
+                self.screen.new_scene = None;
+                self.status.notice = Some(format!(
+                    "Created {}: paint seeds on the first frames, train (T), then track (Ctrl+T).",
+                    scene_json.display()
+                ));
+                self.open_scene(&scene_json.display().to_string());
+            }
             Event::Finished(task) => self.task_ended(task, true),
             Event::Cancelled(task) => {
                 self.task_ended(task, false);
@@ -337,6 +359,12 @@ impl EndofuseApp {
             }
             Event::Failed { task, message } => {
                 self.task_ended(task, false);
+                if task == Task::NewScene
+                    && let Some(form) = self.screen.new_scene.as_mut()
+                {
+                    form.error = Some(message.clone());
+                    form.creating = false;
+                }
                 self.status.fail(message);
             }
         }

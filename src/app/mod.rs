@@ -194,6 +194,7 @@ impl eframe::App for EndofuseApp {
             if shown.view.show_review {
                 panels::review::review_window(&shown, &ctx);
             }
+            panels::new_scene::window(&shown, &mut self.screen.new_scene, &ctx);
         }
         self.apply_commands(&ctx);
         self.close_guard(&ctx);

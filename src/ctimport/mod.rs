@@ -60,7 +60,7 @@ impl Side {
 }
 
 /// What `import-ct` is asked to do.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct ImportOptions {
     pub side: Side,
     pub kidney_label: u16,

@@ -11,6 +11,7 @@ pub fn menu_bar(shown: &Shown, ui: &mut egui::Ui) {
     egui::Panel::top("menu").show(ui, |ui| {
         egui::MenuBar::new().ui(ui, |ui| {
             ui.menu_button("File", |ui| {
+                menu_item(shown, ui, Action::NewScene);
                 menu_item(shown, ui, Action::OpenScene);
                 menu_item(shown, ui, Action::OpenDemo);
                 let recent = &shown.prefs.recent;

@@ -4,6 +4,7 @@
 //! changes a field.
 
 pub mod menu;
+pub mod new_scene;
 pub mod review;
 pub mod side;
 pub mod timeline;

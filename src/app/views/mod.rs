@@ -43,6 +43,8 @@ pub struct Screen {
     pub loader: FrameLoader,
     /// True when the overlay's wgpu pipelines are registered.
     pub gpu_overlay: bool,
+    /// File → New scene's form, while it is open.
+    pub new_scene: Option<crate::app::panels::new_scene::NewSceneForm>,
 }
 
 impl Screen {
@@ -53,6 +55,7 @@ impl Screen {
             layout: Layout::default(),
             loader: FrameLoader::spawn(),
             gpu_overlay,
+            new_scene: None,
         }
     }
 }
