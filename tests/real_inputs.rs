@@ -24,12 +24,17 @@ fn ffmpeg(args: &[&str]) {
         .args(args)
         .output()
         .expect("the ffmpeg program is needed for this test (apt install ffmpeg)");
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
 }
 
 /// calib_A with intrinsics halved for 640×512 frames.
 fn half_size_calibration(dir: &Path) -> (PathBuf, PathBuf) {
-    let mut cal: Calibration = calib::read(&fixtures().join("calib/calib_A_seq1-2-3-4-6-7.txt")).unwrap();
+    let mut cal: Calibration =
+        calib::read(&fixtures().join("calib/calib_A_seq1-2-3-4-6-7.txt")).unwrap();
     cal.image_size = Some((640, 512));
     for c in &mut cal.cameras {
         let i = &mut c.intrinsics;
@@ -85,7 +90,12 @@ fn a_patient_ct_a_real_calibration_and_videos_track_like_png_frames() {
     let (yaml, txt) = half_size_calibration(&dir);
     // The patient's shapes, as import-ct makes them.
     let meshes = dir.join("meshes");
-    common::run_ok(&["import-ct".as_ref(), ct.as_os_str(), "--out".as_ref(), meshes.as_os_str()]);
+    common::run_ok(&[
+        "import-ct".as_ref(),
+        ct.as_os_str(),
+        "--out".as_ref(),
+        meshes.as_os_str(),
+    ]);
     // The phantom through the real calibration.
     let phantom = dir.join("phantom");
     common::run_ok(&[
@@ -102,7 +112,10 @@ fn a_patient_ct_a_real_calibration_and_videos_track_like_png_frames() {
         yaml.as_os_str(),
     ]);
     let scene = endofuse::scene::Scene::open(&phantom).unwrap();
-    assert_eq!((scene.cameras[0].width, scene.cameras[0].height), (640, 512));
+    assert_eq!(
+        (scene.cameras[0].width, scene.cameras[0].height),
+        (640, 512)
+    );
     assert!((scene.cameras[1].baseline_mm() - 4.35).abs() < 0.01);
     // Lossless encodes: x264 RGB (B-frames, GOP 4 so that seeks cross keyframes) per camera,
     // and one side-by-side FFV1 MKV.
@@ -110,15 +123,34 @@ fn a_patient_ct_a_real_calibration_and_videos_track_like_png_frames() {
         let pattern = phantom.join(format!("{cam}/%06d.png"));
         let mp4 = dir.join(format!("{cam}.mp4"));
         ffmpeg(&[
-            "-framerate", "30", "-i", pattern.to_str().unwrap(),
-            "-c:v", "libx264rgb", "-qp", "0", "-g", "4", mp4.to_str().unwrap(),
+            "-framerate",
+            "30",
+            "-i",
+            pattern.to_str().unwrap(),
+            "-c:v",
+            "libx264rgb",
+            "-qp",
+            "0",
+            "-g",
+            "4",
+            mp4.to_str().unwrap(),
         ]);
     }
     let sbs = dir.join("stereo.mkv");
     ffmpeg(&[
-        "-framerate", "30", "-i", phantom.join("left/%06d.png").to_str().unwrap(),
-        "-framerate", "30", "-i", phantom.join("right/%06d.png").to_str().unwrap(),
-        "-filter_complex", "hstack", "-c:v", "ffv1", sbs.to_str().unwrap(),
+        "-framerate",
+        "30",
+        "-i",
+        phantom.join("left/%06d.png").to_str().unwrap(),
+        "-framerate",
+        "30",
+        "-i",
+        phantom.join("right/%06d.png").to_str().unwrap(),
+        "-filter_complex",
+        "hstack",
+        "-c:v",
+        "ffv1",
+        sbs.to_str().unwrap(),
     ]);
 
     let make = |name: &str, calib: &Path, views: Vec<String>| {
@@ -135,7 +167,10 @@ fn a_patient_ct_a_real_calibration_and_videos_track_like_png_frames() {
         args.extend(views.into_iter().map(Into::into));
         let printed = common::run_ok(&args);
         let text = String::from_utf8_lossy(&printed.stdout);
-        assert!(text.contains("next:") && text.contains("endofuse open"), "{text}");
+        assert!(
+            text.contains("next:") && text.contains("endofuse open"),
+            "{text}"
+        );
         out
     };
     let per_camera = |calib: &Path, name: &str| {
@@ -166,7 +201,11 @@ fn a_patient_ct_a_real_calibration_and_videos_track_like_png_frames() {
             for c in 0..2 {
                 let png = scene.frame(c, t).unwrap();
                 let from_video = video.frame(c, t).unwrap();
-                assert!(*png == *from_video, "{}: camera {c} frame {t} differs", s.display());
+                assert!(
+                    *png == *from_video,
+                    "{}: camera {c} frame {t} differs",
+                    s.display()
+                );
             }
         }
     }
@@ -188,8 +227,16 @@ fn a_patient_ct_a_real_calibration_and_videos_track_like_png_frames() {
             png["dice"]["mean"].as_f64().unwrap(),
         );
         eprintln!("{}: Dice {dv:.4} from video, {dp:.4} from PNG", s.display());
-        assert!((dv - dp).abs() <= 0.01, "{}: Dice {dv} from video, {dp} from PNG", s.display());
-        assert!(dp > 0.85, "{}: the patient phantom tracks poorly: Dice {dp}", s.display());
+        assert!(
+            (dv - dp).abs() <= 0.01,
+            "{}: Dice {dv} from video, {dp} from PNG",
+            s.display()
+        );
+        assert!(
+            dp > 0.85,
+            "{}: the patient phantom tracks poorly: Dice {dp}",
+            s.display()
+        );
     }
 }
 
@@ -202,13 +249,27 @@ fn bad_real_inputs_are_refused_with_one_line() {
     // A 320×256 video: the calibration says 640×512.
     let small = dir.join("small.mp4");
     ffmpeg(&[
-        "-f", "lavfi", "-i", "testsrc2=size=320x256:rate=30", "-frames:v", "5",
-        "-c:v", "libx264", small.to_str().unwrap(),
+        "-f",
+        "lavfi",
+        "-i",
+        "testsrc2=size=320x256:rate=30",
+        "-frames:v",
+        "5",
+        "-c:v",
+        "libx264",
+        small.to_str().unwrap(),
     ]);
     let right = dir.join("right.mp4");
     ffmpeg(&[
-        "-f", "lavfi", "-i", "testsrc2=size=640x512:rate=30", "-frames:v", "5",
-        "-c:v", "libx264", right.to_str().unwrap(),
+        "-f",
+        "lavfi",
+        "-i",
+        "testsrc2=size=640x512:rate=30",
+        "-frames:v",
+        "5",
+        "-c:v",
+        "libx264",
+        right.to_str().unwrap(),
     ]);
     let text = dir.join("notes.mp4");
     std::fs::write(&text, "not a video").unwrap();
@@ -221,14 +282,23 @@ fn bad_real_inputs_are_refused_with_one_line() {
     let run = |views: &[&Path], extra: &[&str]| {
         let out = dir.join("scene");
         let mut c = Command::new(env!("CARGO_BIN_EXE_endofuse"));
-        c.arg("new-scene").arg("--out").arg(&out).arg("--calib").arg(&yaml).arg("--ct").arg(&ct);
+        c.arg("new-scene")
+            .arg("--out")
+            .arg(&out)
+            .arg("--calib")
+            .arg(&yaml)
+            .arg("--ct")
+            .arg(&ct);
         for (v, name) in views.iter().zip(["left", "right"]) {
             c.arg("--view").arg(format!("{name}={}", v.display()));
         }
         c.args(extra);
         let o = c.output().unwrap();
         let stderr = String::from_utf8_lossy(&o.stderr).to_string();
-        let errors: Vec<&str> = stderr.lines().filter(|l| l.starts_with("endofuse:")).collect();
+        let errors: Vec<&str> = stderr
+            .lines()
+            .filter(|l| l.starts_with("endofuse:"))
+            .collect();
         if o.status.code() == Some(2) {
             assert!(!out.exists(), "nothing may be written: {stderr}");
         }
@@ -236,17 +306,35 @@ fn bad_real_inputs_are_refused_with_one_line() {
     };
     let cases: Vec<(Vec<&Path>, Vec<&str>, &str, &str)> = vec![
         (vec![&small, &small], vec![], "stereo.yml", "320×256"),
-        (vec![&small, &right], vec![], "right.mp4", "640×512 but camera 'left'"),
-        (vec![&text, &right], vec![], "notes.mp4", "not a readable video"),
+        (
+            vec![&small, &right],
+            vec![],
+            "right.mp4",
+            "640×512 but camera 'left'",
+        ),
+        (
+            vec![&text, &right],
+            vec![],
+            "notes.mp4",
+            "not a readable video",
+        ),
         (vec![&audio, &right], vec![], "tone.mkv", "no video stream"),
-        (vec![&right, &right], vec!["--frames", "50"], "--frames", "only 5"),
+        (
+            vec![&right, &right],
+            vec!["--frames", "50"],
+            "--frames",
+            "only 5",
+        ),
         (vec![&right], vec![], "stereo.yml", "2 camera(s)"),
     ];
     for (views, extra, file, words) in cases {
         let (code, line) = run(&views, &extra);
         assert_eq!(code, Some(2), "{file}: {line}");
         assert_eq!(line.lines().count(), 1, "{line}");
-        assert!(line.contains(file) && line.contains(words), "expected {file} / {words}: {line}");
+        assert!(
+            line.contains(file) && line.contains(words),
+            "expected {file} / {words}: {line}"
+        );
     }
     // A truncated video is refused when it opens or when a frame past the cut is read; either
     // way the message names the file, never wrong pixels.
