@@ -125,9 +125,8 @@ fn phantom(linear: DMat3, offset: DVec3) -> (LabelVolume, DVec3, DVec3) {
             for i in 0..dims[0] {
                 let w = linear * DVec3::new(i as f64, j as f64, k as f64) + offset;
                 let inside = |c: DVec3| ((w - c) / axes).length_squared() <= 1.0;
-                let v = if (w - exo_centre).length() <= 9.0 {
-                    2
-                } else if (w - endo_centre).length() <= 8.0 {
+                let tumour = (w - exo_centre).length() <= 9.0 || (w - endo_centre).length() <= 8.0;
+                let v = if tumour {
                     2
                 } else if inside(right) || inside(left) {
                     1

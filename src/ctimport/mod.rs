@@ -374,6 +374,12 @@ pub fn build(
         for v in &mut s.mesh.vertices {
             *v -= centre;
         }
+        if s.self_intersections > 0 {
+            notes.push(format!(
+                "{}: {} pairs of faces cross (smoothing pressed two close sheets together)",
+                s.name, s.self_intersections
+            ));
+        }
         if s.volume_error.abs() > VOLUME_TOLERANCE {
             notes.push(format!(
                 "{}: mesh volume differs from the voxel volume by {:.1} % (more than {:.0} %)",
@@ -538,7 +544,6 @@ fn mesh_structure(
     // one: the result is always closed, manifold and free of intersections, at the cost of
     // more vertices than asked where the organ is thin. The dense surface is valid by
     // construction (a well-composed mask).
-    let mut mesh = mesh;
     let valid =
         |m: &Mesh| surface::topology(m).is_closed_manifold() && surface::self_intersections(m) == 0;
     while mesh.vertices.len() > target_vertices + target_vertices / 50 {
