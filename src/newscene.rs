@@ -29,7 +29,8 @@ pub enum Anatomy {
 /// Where the frames come from.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Views {
-    /// One video file or image folder per camera, in the calibration's camera order.
+    /// One video file or image folder per camera: (camera name, file). Either every view names
+    /// a camera of the calibration, or none does (empty names) and they follow its order.
     PerCamera(Vec<(String, PathBuf)>),
     /// One video whose left and right halves are the two cameras.
     SideBySide(PathBuf),
@@ -58,11 +59,18 @@ pub struct NewSceneReport {
     pub fps: f64,
     pub structures: Vec<(String, bool)>,
     pub ct: Option<ctimport::ImportReport>,
+    /// The views' frame counts when they differ (the scene takes the shortest).
+    pub uneven_views: Option<String>,
 }
 
 impl NewSceneReport {
     /// What the user does next.
     pub fn next_steps(&self) -> String {
+        let uneven = self
+            .uneven_views
+            .as_ref()
+            .map(|c| format!("\nnote: the views have different frame counts ({c}); the scene uses the first {}", self.frame_count))
+            .unwrap_or_default();
         let structures: Vec<String> = self
             .structures
             .iter()
@@ -71,7 +79,7 @@ impl NewSceneReport {
         format!(
             "new-scene: {} — {} cameras ({}) at {}×{}, {} frames at {:.2} fps; structures: {}\n\
              next: open it with `endofuse open {}`, paint background (key 1) and structure (2, 3, …) \
-             strokes on the first frames (B brush, E eraser), train the forest (T), then track (Ctrl+T)",
+             strokes on the first frames (B brush, E eraser), train the forest (T), then track (Ctrl+T){uneven}",
             self.scene_json.display(),
             self.cameras.len(),
             self.cameras.join(", "),
@@ -87,6 +95,8 @@ impl NewSceneReport {
 
 /// A view as found: its frames entry (relative to the scene, or absolute), size, frame count.
 struct View {
+    /// The file or folder the user gave.
+    source: PathBuf,
     frames: FramesEntry,
     size: (u32, u32),
     frame_count: usize,
@@ -113,6 +123,7 @@ fn video_view(path: &Path, name: &str, copy: bool) -> Result<View, InputError> {
         (absolute(path).to_string_lossy().to_string(), Vec::new())
     };
     Ok(View {
+        source: path.to_path_buf(),
         frames: FramesEntry::Path(frames),
         size: (info.width, info.height),
         frame_count: info.frame_count,
@@ -199,6 +210,7 @@ fn folder_view(dir: &Path, name: &str, copy: bool) -> Result<View, InputError> {
         )
     };
     Ok(View {
+        source: dir.to_path_buf(),
         frames: FramesEntry::Path(frames),
         size,
         frame_count: numbered.len(),
@@ -242,7 +254,14 @@ pub fn new_scene(
     options: &NewSceneOptions,
     progress: &dyn Fn(&str),
 ) -> Result<NewSceneReport, Error> {
-    output::check_target(&options.out, options.force)?;
+    let mut inputs: Vec<&Path> = vec![&options.calib];
+    inputs.push(match &options.anatomy {
+        Anatomy::Ct { labels, .. } => labels,
+        Anatomy::Meshes(dir) => dir,
+    });
+    let view_files = view_paths(&options.views);
+    inputs.extend(view_files.iter().map(PathBuf::as_path));
+    output::check_target(&options.out, options.force, &inputs)?;
     let calibration = calib::read(&options.calib)?;
     progress("reading the views");
     let names: Vec<String> = calibration.cameras.iter().map(|c| c.name.clone()).collect();
@@ -265,6 +284,7 @@ pub fn new_scene(
                 FramesEntry::Video { video, .. } => video.clone(),
             };
             let half = |c: video::Crop| View {
+                source: path.clone(),
                 frames: FramesEntry::Video {
                     video: video.clone(),
                     crop: Some([c.x as i64, c.y as i64, c.width as i64, c.height as i64]),
@@ -291,25 +311,41 @@ pub fn new_scene(
                 )
                 .into());
             }
-            let mut out = Vec::new();
+            // Each view names a camera of the calibration, once; or no view is named and
+            // they follow the calibration's order.
+            let unnamed = list.iter().all(|(n, _)| n.is_empty());
+            let mut out: Vec<(String, View)> = Vec::new();
             for (i, (given, path)) in list.iter().enumerate() {
-                // A view named like a calibration camera goes to it; else by order.
-                let name = if names.contains(given) {
-                    given.clone()
-                } else {
-                    names[i].clone()
-                };
-                out.push((name.clone(), view_of(path, &name, options.copy_frames)?));
+                let given = if unnamed { &names[i] } else { given };
+                if !names.contains(given) {
+                    return Err(InputError::new(
+                        "--view",
+                        format!(
+                            "'{given}' is not a camera of {} (its cameras: {})",
+                            options.calib.display(),
+                            names.join(", ")
+                        ),
+                    )
+                    .into());
+                }
+                if out.iter().any(|(n, _)| n == given) {
+                    return Err(InputError::new(
+                        "--view",
+                        format!("camera '{given}' is given twice"),
+                    )
+                    .into());
+                }
+                out.push((given.clone(), view_of(path, given, options.copy_frames)?));
             }
             out.sort_by_key(|(n, _)| names.iter().position(|m| m == n));
             out
         }
     };
     let size = views[0].1.size;
-    for ((name, v), given) in views.iter().zip(view_paths(&options.views)) {
+    for (name, v) in &views {
         if v.size != size {
             return Err(InputError::new(
-                given,
+                &v.source,
                 format!(
                     "camera '{name}' frames are {}×{} but camera '{}' frames are {}×{}",
                     v.size.0, v.size.1, views[0].0, size.0, size.1
@@ -341,7 +377,25 @@ pub fn new_scene(
         Some(n) => n,
         None => available,
     };
-    let fps = views.iter().find_map(|(_, v)| v.fps).unwrap_or(30.0);
+    let rates: Vec<(&str, &View, f64)> = views
+        .iter()
+        .filter_map(|(n, v)| Some((n.as_str(), v, v.fps?)))
+        .collect();
+    if let Some((n0, _, r0)) = rates.first()
+        && let Some((n, v, r)) = rates.iter().find(|(_, _, r)| (r / r0 - 1.0).abs() > 0.01)
+    {
+        return Err(InputError::new(
+            &v.source,
+            format!("camera '{n}' runs at {r:.3} fps but camera '{n0}' at {r0:.3} fps: the views would drift apart"),
+        )
+        .into());
+    }
+    let fps = rates.first().map(|r| r.2).unwrap_or(30.0);
+    let counts: Vec<String> = views
+        .iter()
+        .map(|(n, v)| format!("{n} {}", v.frame_count))
+        .collect();
+    let uneven = views.iter().any(|(_, v)| v.frame_count != available);
 
     let tmp = output::staging(&options.out)?;
     let result = assemble(&tmp, options, &cameras, &views, frame_count, fps, progress);
@@ -361,6 +415,7 @@ pub fn new_scene(
         fps,
         structures,
         ct,
+        uneven_views: uneven.then(|| counts.join(", ")),
     })
 }
 

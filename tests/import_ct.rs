@@ -245,22 +245,56 @@ fn side_and_labels_options() {
     let dir = scratch("ct-side");
     let path = dir.join("v.nii.gz");
     write(&path, &vol, WriteTransform::Sform, WriteType::Uint8, false).unwrap();
-    // The left kidney has no tumour: kidney only, and ct.json says so.
+    // --side right is the kidney auto picks (its tumours), --side left the other one, which
+    // has none: kidney only, and ct.json says so.
+    let ct = import_ok(&path, &dir.join("right"), &["--side", "right"]);
+    assert_eq!(ct["side"], "right");
+    assert_eq!(ct["structures"].as_array().unwrap().len(), 3);
     let ct = import_ok(&path, &dir.join("left"), &["--side", "left"]);
     assert_eq!(ct["side"], "left");
     assert_eq!(ct["structures"].as_array().unwrap().len(), 1);
-    assert!(ct["notes"].to_string().contains("no tumour"), "{ct}");
-    // Label numbers by name (US spelling too); an unknown name is refused.
+    assert!(
+        ct["notes"]
+            .to_string()
+            .contains("no tumour in the chosen kidney"),
+        "{ct}"
+    );
+    assert!(
+        ct["notes"]
+            .to_string()
+            .contains("outside the chosen kidney"),
+        "{ct}"
+    );
+
+    // Other label numbers: without --labels the KiTS default finds no kidney.
+    let relabelled = LabelVolume {
+        labels: vol.labels.iter().map(|&l| [0, 5, 7][l as usize]).collect(),
+        ..vol.clone()
+    };
+    let p57 = dir.join("v57.nii");
+    write(
+        &p57,
+        &relabelled,
+        WriteTransform::Sform,
+        WriteType::Uint8,
+        false,
+    )
+    .unwrap();
+    let o = dir.join("x");
+    expect_bad(
+        &[p57.as_os_str(), "--out".as_ref(), o.as_os_str()],
+        "v57.nii",
+        "no voxel has the kidney label 1 (labels present: 5, 7)",
+    );
     let ct = import_ok(
-        &path,
+        &p57,
         &dir.join("relabel"),
-        &["--labels", "kidney=1,tumor=2,cyst=9"],
+        &["--labels", "kidney=5,tumor=7"],
     );
     assert_eq!(ct["structures"].as_array().unwrap().len(), 3);
-    let (p, o) = (path.as_os_str(), dir.join("x"));
     expect_bad(
         &[
-            p,
+            p57.as_os_str(),
             "--out".as_ref(),
             o.as_os_str(),
             "--labels".as_ref(),
@@ -269,6 +303,27 @@ fn side_and_labels_options() {
         "--labels",
         "unknown structure",
     );
+
+    // One kidney only (the volume cropped to the right half): its side is unknown, and
+    // either --side takes it.
+    let half = LabelVolume {
+        labels: (0..vol.labels.len())
+            .map(|n| {
+                if n % vol.dims[0] >= vol.dims[0] / 2 {
+                    vol.labels[n]
+                } else {
+                    0
+                }
+            })
+            .collect(),
+        ..vol.clone()
+    };
+    let p1 = dir.join("one.nii.gz");
+    write(&p1, &half, WriteTransform::Sform, WriteType::Uint8, false).unwrap();
+    let ct = import_ok(&p1, &dir.join("one"), &["--side", "left"]);
+    assert_eq!(ct["side"], "unknown");
+    assert_eq!(ct["kidneys_found"], 1);
+    assert_eq!(ct["structures"].as_array().unwrap().len(), 3);
 }
 
 fn expect_bad(args: &[&std::ffi::OsStr], file: &str, words: &str) {
@@ -391,15 +446,35 @@ fn bad_label_volumes_are_refused_with_one_line() {
         "datatype",
     );
 
-    // An output folder with something in it is kept unless --force.
+    // An output folder with something in it is kept, with or without --force, unless it is an
+    // earlier output; a folder holding the input is never replaced.
     std::fs::create_dir_all(&out).unwrap();
     std::fs::write(out.join("keep.txt"), "mine").unwrap();
     let f = fixture();
     expect_bad(&[f.as_os_str(), "--out".as_ref(), o], "out", "not empty");
+    expect_bad(
+        &[f.as_os_str(), "--out".as_ref(), o, "--force".as_ref()],
+        "out",
+        "not an earlier endofuse output",
+    );
     assert!(out.join("keep.txt").exists());
-    let ct = import_ok(&f, &out, &["--force"]);
-    assert!(!out.join("keep.txt").exists());
+    let earlier = dir.join("earlier");
+    import_ok(&f, &earlier, &[]);
+    let ct = import_ok(&f, &earlier, &["--force"]);
     assert_eq!(ct["structures"].as_array().unwrap().len(), 2);
+    let inside = earlier.join("labels.nii.gz");
+    std::fs::copy(&f, &inside).unwrap();
+    expect_bad(
+        &[
+            inside.as_os_str(),
+            "--out".as_ref(),
+            earlier.as_os_str(),
+            "--force".as_ref(),
+        ],
+        "earlier",
+        "holds an input",
+    );
+    assert!(inside.exists() && earlier.join("ct.json").exists());
     // Nothing half-written is left beside it.
     let leftovers: Vec<_> = std::fs::read_dir(&dir)
         .unwrap()

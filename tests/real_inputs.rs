@@ -336,6 +336,64 @@ fn bad_real_inputs_are_refused_with_one_line() {
             "expected {file} / {words}: {line}"
         );
     }
+    // Views name calibration cameras, each once; given out of order they still land right.
+    let named = |views: &[(&str, &Path)]| {
+        let out = dir.join("named");
+        let _ = std::fs::remove_dir_all(&out);
+        let mut c = Command::new(env!("CARGO_BIN_EXE_endofuse"));
+        c.arg("new-scene")
+            .arg("--out")
+            .arg(&out)
+            .arg("--calib")
+            .arg(&yaml)
+            .arg("--ct")
+            .arg(&ct);
+        for (name, v) in views {
+            c.arg("--view").arg(format!("{name}={}", v.display()));
+        }
+        let o = c.output().unwrap();
+        (
+            o.status.code(),
+            String::from_utf8_lossy(&o.stderr).to_string(),
+            out,
+        )
+    };
+    let (code, err, _) = named(&[("right", &right), ("r", &small)]);
+    assert_eq!(code, Some(2));
+    assert!(
+        err.contains("--view") && err.contains("'r' is not a camera"),
+        "{err}"
+    );
+    let (code, err, _) = named(&[("right", &right), ("right", &small)]);
+    assert_eq!(code, Some(2));
+    assert!(err.contains("given twice"), "{err}");
+    // Swapped order, with the wrong-size video named: the error names that file.
+    let (code, err, _) = named(&[("right", &small), ("left", &right)]);
+    assert_eq!(code, Some(2));
+    assert!(
+        err.contains("small.mp4") && err.contains("camera 'right'"),
+        "{err}"
+    );
+    let other = dir.join("other.mp4");
+    std::fs::copy(&right, &other).unwrap();
+    let (code, err, out) = named(&[("right", &right), ("left", &other)]);
+    assert_eq!(code, Some(0), "{err}");
+    let v = common::read_json(&out.join("scene.json"));
+    assert!(
+        v["cameras"][0]["frames"]
+            .as_str()
+            .unwrap()
+            .ends_with("other.mp4"),
+        "{v}"
+    );
+    assert!(
+        v["cameras"][1]["frames"]
+            .as_str()
+            .unwrap()
+            .ends_with("right.mp4"),
+        "{v}"
+    );
+
     // A truncated video is refused when it opens or when a frame past the cut is read; either
     // way the message names the file, never wrong pixels.
     let (code, line) = run(&[&truncated, &right], &[]);

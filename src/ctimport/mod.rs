@@ -189,7 +189,7 @@ pub fn import_ct(
     options: &ImportOptions,
     progress: &dyn Fn(&str),
 ) -> Result<ImportReport, Error> {
-    output::check_target(out, options.force)?;
+    output::check_target(out, options.force, &[labels])?;
     progress("reading the label volume");
     let vol = volume::read(labels).map_err(|e| InputError::new(labels, e.to_string()))?;
     let mut report = build(&vol, options, progress).map_err(|p| InputError::new(labels, p))?;
@@ -230,69 +230,82 @@ pub fn build(
         ));
     }
     let organ_label = |v: u16| v == kl || v == tl || Some(v) == cl;
-    // Work on the bounding block of the organ labels, with one voxel of margin.
+    // Work on the bounding block of the organ labels.
     let block = bounding_block(vol, organ_label);
-    let inside = |n: usize| organ_label(vol.labels[block.volume_index(n)]);
+    let label_at = |n: usize| vol.labels[block.volume_index(n)];
     progress("finding the kidneys");
-    let (organ_id, organ_sizes) = mask::components(block.dims, inside);
-    let voxel_mm3 = vol.voxel_volume_mm3();
-    let centroid_of = |id: &[u32], c: u32| {
-        let mut sum = DVec3::ZERO;
-        let mut n = 0usize;
-        for (x, &v) in id.iter().enumerate() {
-            if v == c {
-                sum += vol.world(block.ijk(x));
-                n += 1;
-            }
+    let (organ_id, organ_sizes) = mask::components(block.dims, |n| organ_label(label_at(n)));
+    let (tumour_id, tumour_sizes) = mask::components(block.dims, |n| label_at(n) == tl);
+    // One pass for what each component is: its centroid and bounds, whether it holds kidney
+    // voxels, and which organ component each tumour lies in.
+    let mut organs = vec![ComponentStats::default(); organ_sizes.len()];
+    let mut tumour_organ = vec![u32::MAX; tumour_sizes.len()];
+    let mut tumour_bounds = vec![ComponentStats::default(); tumour_sizes.len()];
+    for n in 0..organ_id.len() {
+        let o = organ_id[n];
+        if o == u32::MAX {
+            continue;
         }
-        sum / n.max(1) as f64
-    };
-    // Kidneys: organ components of at least a fifth of the largest (the rest are fragments).
-    let largest = organ_sizes.iter().copied().max().unwrap_or(0);
-    let kidneys: Vec<u32> = (0..organ_sizes.len() as u32)
-        .filter(|&c| organ_sizes[c as usize] * 5 >= largest)
+        let ijk = block.local(n);
+        organs[o as usize].add(ijk, vol.world(block.ijk(n)), label_at(n) == kl);
+        let t = tumour_id[n];
+        if t != u32::MAX {
+            tumour_organ[t as usize] = o;
+            tumour_bounds[t as usize].add(ijk, DVec3::ZERO, false);
+        }
+    }
+    let voxel_mm3 = vol.voxel_volume_mm3();
+    // Kidneys: organ components with kidney voxels, at least a fifth of the largest of them.
+    let largest = (0..organs.len())
+        .filter(|&c| organs[c].kidney_voxels > 0)
+        .map(|c| organ_sizes[c])
+        .max()
+        .unwrap_or(0);
+    let kidneys: Vec<u32> = (0..organs.len() as u32)
+        .filter(|&c| organs[c as usize].kidney_voxels > 0 && organ_sizes[c as usize] * 5 >= largest)
         .collect();
-    let (tumour_id, tumour_sizes) =
-        mask::components(block.dims, |n| vol.labels[block.volume_index(n)] == tl);
     let mut notes = Vec::new();
+    let centroid = |c: u32| organs[c as usize].centroid();
     let (chosen, side_reason) = choose_kidney(
         &kidneys,
-        &organ_id,
         &organ_sizes,
-        &tumour_id,
+        &tumour_organ,
         &tumour_sizes,
         options.side,
-        &|c| centroid_of(&organ_id, c),
-        vol,
+        &centroid,
     )?;
-    let kidney_x = centroid_of(&organ_id, chosen).x;
     let side = if kidneys.len() >= 2 {
-        let others: Vec<f64> = kidneys
+        let x = centroid(chosen).x;
+        if kidneys
             .iter()
             .filter(|&&c| c != chosen)
-            .map(|&c| centroid_of(&organ_id, c).x)
-            .collect();
-        if others.iter().all(|&x| kidney_x > x) {
+            .all(|&c| x > centroid(c).x)
+        {
             "right"
         } else {
             "left"
         }
     } else {
-        let centre = vol
-            .world(
-                DVec3::new(vol.dims[0] as f64, vol.dims[1] as f64, vol.dims[2] as f64) * 0.5 - 0.5,
-            )
-            .x;
-        if kidney_x > centre { "right" } else { "left" }
+        notes.push(
+            "one kidney in the volume: which side it is cannot be told from the labels alone"
+                .to_string(),
+        );
+        "unknown"
     };
-    // Tumour components inside the chosen organ, largest first.
+    // Tumour components inside the chosen organ, largest first; the others are said.
+    let elsewhere: Vec<usize> = (0..tumour_sizes.len())
+        .filter(|&t| tumour_organ[t] != chosen)
+        .map(|t| tumour_sizes[t])
+        .collect();
+    if !elsewhere.is_empty() {
+        notes.push(format!(
+            "{} tumour component(s) outside the chosen kidney not imported (voxels: {:?})",
+            elsewhere.len(),
+            elsewhere
+        ));
+    }
     let mut tumours: Vec<(u32, usize)> = (0..tumour_sizes.len() as u32)
-        .filter(|&t| {
-            tumour_id
-                .iter()
-                .zip(&organ_id)
-                .any(|(&ti, &oi)| ti == t && oi == chosen)
-        })
+        .filter(|&t| tumour_organ[t as usize] == chosen)
         .map(|t| (t, tumour_sizes[t as usize]))
         .collect();
     tumours.sort_by_key(|&(t, n)| (std::cmp::Reverse(n), t));
@@ -304,8 +317,14 @@ pub fn build(
         }
         keep
     });
+    if tumours.len() > 253 {
+        return Err(format!(
+            "{} tumour components: a scene holds at most 253 besides the kidney",
+            tumours.len()
+        ));
+    }
     if tumours.is_empty() {
-        notes.push("no tumour: the scene has the kidney only".into());
+        notes.push("no tumour in the chosen kidney: the scene has the kidney only".into());
     }
     let spacing = vol.spacing_mm();
     let face_area = [
@@ -314,12 +333,12 @@ pub fn build(
         spacing[0] * spacing[1],
     ];
     let mut structures = Vec::new();
-    let mut exophytic_voxels = vec![false; organ_id.len()];
+    let mut exophytic = vec![false; tumour_sizes.len()];
     let (mut n_exo, mut n_endo) = (0, 0);
-    let mut next_label = 2u8;
     let mut tumour_masks = Vec::new();
-    for &(t, n) in &tumours {
-        let exposure = exposure(&block, &tumour_id, t, &organ_id, chosen, face_area);
+    for (k, &(t, n)) in tumours.iter().enumerate() {
+        let bounds = &tumour_bounds[t as usize];
+        let exposure = exposure(&block, bounds, &tumour_id, t, &organ_id, chosen, face_area);
         let visible = exposure.exposed_share >= EXPOSED_SHARE;
         let (base, count) = if visible {
             n_exo += 1;
@@ -333,19 +352,16 @@ pub fn build(
         } else {
             format!("{base}_{count}")
         };
-        if visible {
-            for (x, &ti) in tumour_id.iter().enumerate() {
-                if ti == t {
-                    exophytic_voxels[x] = true;
-                }
-            }
-        }
-        let m = block.mask(|x| tumour_id[x] == t);
-        tumour_masks.push((name, next_label, visible, n, exposure, m));
-        next_label = next_label.saturating_add(1);
+        exophytic[t as usize] = visible;
+        let m = block.mask_in(bounds, |x| tumour_id[x] == t);
+        tumour_masks.push((name, (k + 2) as u8, visible, n, exposure, m));
     }
+    let kidney_mask = block.mask_in(&organs[chosen as usize], |x| {
+        organ_id[x] == chosen && (tumour_id[x] == u32::MAX || !exophytic[tumour_id[x] as usize])
+    });
+    // The component maps are done with: free them before meshing.
+    drop((organ_id, tumour_id));
     progress("meshing the kidney");
-    let kidney_mask = block.mask(|x| organ_id[x] == chosen && !exophytic_voxels[x]);
     let kidney_voxels = kidney_mask.count();
     if let Some(edge) = touches_volume_edge(&kidney_mask, vol.dims) {
         notes.push(format!(
@@ -406,16 +422,13 @@ pub fn build(
 }
 
 /// Picks the organ component to mesh; the reason says why, for ct.json.
-#[allow(clippy::too_many_arguments)]
 fn choose_kidney(
     kidneys: &[u32],
-    organ_id: &[u32],
     organ_sizes: &[usize],
-    tumour_id: &[u32],
+    tumour_organ: &[u32],
     tumour_sizes: &[usize],
     side: Side,
     centroid: &dyn Fn(u32) -> DVec3,
-    vol: &LabelVolume,
 ) -> Result<(u32, String), String> {
     let by_x = |a: &u32, b: &u32| centroid(*a).x.total_cmp(&centroid(*b).x);
     match side {
@@ -426,37 +439,25 @@ fn choose_kidney(
                 kidneys.iter().copied().min_by(by_x)
             };
             let pick = pick.ok_or("no kidney component")?;
-            if kidneys.len() == 1 {
-                let c = vol
-                    .world(
-                        DVec3::new(vol.dims[0] as f64, vol.dims[1] as f64, vol.dims[2] as f64)
-                            * 0.5
-                            - 0.5,
-                    )
-                    .x;
-                let is_right = centroid(pick).x > c;
-                if is_right != (side == Side::Right) {
-                    return Err(format!(
-                        "the volume holds one kidney, on the patient's {} (world x relative to the volume centre); --side {} asks for the other",
-                        if is_right { "right" } else { "left" },
-                        if side == Side::Right { "right" } else { "left" }
-                    ));
-                }
-            }
-            Ok((pick, format!("--side {:?}", side).to_lowercase()))
+            let which = if side == Side::Right { "right" } else { "left" };
+            let reason = if kidneys.len() == 1 {
+                format!("--side {which}, but the volume holds one kidney: that one")
+            } else {
+                format!("--side {which}: the kidney at the {which} (world x, RAS+)")
+            };
+            Ok((pick, reason))
         }
         Side::Auto => {
-            // The largest tumour's organ component.
-            let largest = (0..tumour_sizes.len() as u32).max_by_key(|&t| tumour_sizes[t as usize]);
-            if let Some(t) = largest
-                && let Some(x) = tumour_id.iter().position(|&v| v == t)
-            {
-                let c = organ_id[x];
+            // The kidney holding the largest tumour.
+            let largest = (0..tumour_sizes.len())
+                .filter(|&t| kidneys.contains(&tumour_organ[t]))
+                .max_by_key(|&t| tumour_sizes[t]);
+            if let Some(t) = largest {
                 return Ok((
-                    c,
+                    tumour_organ[t],
                     format!(
                         "auto: the kidney the largest tumour ({} voxels) touches",
-                        tumour_sizes[t as usize]
+                        tumour_sizes[t]
                     ),
                 ));
             }
@@ -465,8 +466,49 @@ fn choose_kidney(
                 .copied()
                 .max_by_key(|&c| organ_sizes[c as usize])
                 .ok_or("no kidney component")?;
-            Ok((c, "auto: no tumour, the larger kidney".into()))
+            Ok((
+                c,
+                "auto: no tumour touches a kidney, the larger kidney".into(),
+            ))
         }
+    }
+}
+
+/// Per component: voxel bounds (block coordinates), world centroid, kidney-label voxels.
+#[derive(Debug, Clone)]
+struct ComponentStats {
+    lo: [usize; 3],
+    hi: [usize; 3],
+    sum_mm: DVec3,
+    count: usize,
+    kidney_voxels: usize,
+}
+
+impl Default for ComponentStats {
+    fn default() -> Self {
+        Self {
+            lo: [usize::MAX; 3],
+            hi: [0; 3],
+            sum_mm: DVec3::ZERO,
+            count: 0,
+            kidney_voxels: 0,
+        }
+    }
+}
+
+impl ComponentStats {
+    fn add(&mut self, ijk: [usize; 3], world: DVec3, kidney: bool) {
+        for (a, &v) in ijk.iter().enumerate() {
+            self.lo[a] = self.lo[a].min(v);
+            self.hi[a] = self.hi[a].max(v);
+        }
+        self.sum_mm += world;
+        self.count += 1;
+        self.kidney_voxels += kidney as usize;
+    }
+
+    fn centroid(&self) -> DVec3 {
+        self.sum_mm / self.count.max(1) as f64
     }
 }
 
@@ -474,6 +516,7 @@ fn choose_kidney(
 /// tumour of the same kidney) versus towards anything else.
 fn exposure(
     block: &Block,
+    bounds: &ComponentStats,
     tumour_id: &[u32],
     t: u32,
     organ_id: &[u32],
@@ -482,27 +525,31 @@ fn exposure(
 ) -> Exposure {
     let (mut exposed, mut enclosed) = (0.0, 0.0);
     let d = block.dims;
-    for (x, &ti) in tumour_id.iter().enumerate() {
-        if ti != t {
-            continue;
-        }
-        let (i, j, k) = (x % d[0], (x / d[0]) % d[1], x / (d[0] * d[1]));
-        let steps: [(bool, usize, usize); 6] = [
-            (i > 0, x.wrapping_sub(1), 0),
-            (i + 1 < d[0], x + 1, 0),
-            (j > 0, x.wrapping_sub(d[0]), 1),
-            (j + 1 < d[1], x + d[0], 1),
-            (k > 0, x.wrapping_sub(d[0] * d[1]), 2),
-            (k + 1 < d[2], x + d[0] * d[1], 2),
-        ];
-        for (ok, m, axis) in steps {
-            if ok && tumour_id[m] == t {
-                continue;
-            }
-            if ok && organ_id[m] == organ {
-                enclosed += face_area_mm2[axis];
-            } else {
-                exposed += face_area_mm2[axis];
+    for k in bounds.lo[2]..=bounds.hi[2] {
+        for j in bounds.lo[1]..=bounds.hi[1] {
+            for i in bounds.lo[0]..=bounds.hi[0] {
+                let x = i + d[0] * (j + d[1] * k);
+                if tumour_id[x] != t {
+                    continue;
+                }
+                let steps: [(bool, usize, usize); 6] = [
+                    (i > 0, x.wrapping_sub(1), 0),
+                    (i + 1 < d[0], x + 1, 0),
+                    (j > 0, x.wrapping_sub(d[0]), 1),
+                    (j + 1 < d[1], x + d[0], 1),
+                    (k > 0, x.wrapping_sub(d[0] * d[1]), 2),
+                    (k + 1 < d[2], x + d[0] * d[1], 2),
+                ];
+                for (ok, m, axis) in steps {
+                    if ok && tumour_id[m] == t {
+                        continue;
+                    }
+                    if ok && organ_id[m] == organ {
+                        enclosed += face_area_mm2[axis];
+                    } else {
+                        exposed += face_area_mm2[axis];
+                    }
+                }
             }
         }
     }
@@ -546,6 +593,7 @@ fn mesh_structure(
     // construction (a well-composed mask).
     let valid =
         |m: &Mesh| surface::topology(m).is_closed_manifold() && surface::self_intersections(m) == 0;
+    let dense = mesh.clone();
     while mesh.vertices.len() > target_vertices + target_vertices / 50 {
         let n = mesh.vertices.len() as f64;
         let tries = [
@@ -563,14 +611,29 @@ fn mesh_structure(
         });
         match step {
             Some(m) => mesh = m,
-            None => {
-                log::debug!(
-                    "{name}: decimation stops at {} vertices (no smaller step is valid)",
-                    mesh.vertices.len()
-                );
+            None => break,
+        }
+    }
+    // Stuck above the target: collapses in another order (straight from the dense surface,
+    // to slightly different targets) often pass where the steps pinched.
+    if mesh.vertices.len() > target_vertices + target_vertices / 10 {
+        let stuck = mesh.vertices.len();
+        for grow in [1.0, 1.05, 1.1, 1.2, 1.35] {
+            let goal = (target_vertices as f64 * grow) as usize;
+            let found = [false, true].into_iter().find_map(|regularize| {
+                let mut m = smooth::decimate(&dense, goal, regularize);
+                smooth::taubin(&mut m, 1);
+                (valid(&m) && m.vertices.len() < mesh.vertices.len()).then_some(m)
+            });
+            if let Some(m) = found {
+                mesh = m;
                 break;
             }
         }
+        log::debug!(
+            "{name}: stepwise decimation stopped at {stuck} vertices; kept {}",
+            mesh.vertices.len()
+        );
     }
     let topology = surface::topology(&mesh);
     if !topology.is_closed_manifold() {
@@ -671,10 +734,25 @@ impl Block {
         )
     }
 
-    fn mask(&self, inside: impl Fn(usize) -> bool) -> Mask {
-        let mut m = Mask::new(self.dims, self.origin.map(|o| o as isize));
-        for (n, v) in m.data.iter_mut().enumerate() {
-            *v = inside(n);
+    fn local(&self, n: usize) -> [usize; 3] {
+        let d = self.dims;
+        [n % d[0], (n / d[0]) % d[1], n / (d[0] * d[1])]
+    }
+
+    /// The mask of `inside` (block indices) over the bounds of one component only.
+    fn mask_in(&self, b: &ComponentStats, inside: impl Fn(usize) -> bool) -> Mask {
+        let dims = [0, 1, 2].map(|a| b.hi[a].saturating_sub(b.lo[a]) + 1);
+        let origin = [0, 1, 2].map(|a| (self.origin[a] + b.lo[a].min(b.hi[a])) as isize);
+        let mut m = Mask::new(dims, origin);
+        let d = self.dims;
+        for k in 0..dims[2] {
+            for j in 0..dims[1] {
+                for i in 0..dims[0] {
+                    let x = (b.lo[0] + i) + d[0] * ((b.lo[1] + j) + d[1] * (b.lo[2] + k));
+                    let n = m.index(i, j, k);
+                    m.data[n] = inside(x);
+                }
+            }
         }
         m
     }

@@ -10,16 +10,56 @@ use crate::geometry::mesh_io::write_obj;
 use crate::scene::format::StructureEntry;
 use std::path::{Path, PathBuf};
 
-/// Refuses an output folder that exists and is not empty, unless `force`.
-pub fn check_target(out: &Path, force: bool) -> Result<(), Error> {
+/// Refuses an output folder that exists and is not empty, unless `force` — and even then
+/// refuses what replacing would destroy beyond an earlier output: the working folder or one
+/// above it, a folder holding one of the `inputs`, or a folder that is not an endofuse output
+/// (no ct.json, structures.json or scene.json in it).
+pub fn check_target(out: &Path, force: bool, inputs: &[&Path]) -> Result<(), Error> {
     if out.is_file() {
         return Err(InputError::new(out, "is a file; --out needs a folder").into());
     }
     let non_empty = std::fs::read_dir(out).is_ok_and(|mut d| d.next().is_some());
-    if non_empty && !force {
+    if !non_empty {
+        return Ok(());
+    }
+    if !force {
         return Err(InputError::new(
             out,
             "output folder exists and is not empty (choose another or pass --force to replace it)",
+        )
+        .into());
+    }
+    let target = std::fs::canonicalize(out).unwrap_or_else(|_| out.to_path_buf());
+    let here = std::env::current_dir()
+        .and_then(std::fs::canonicalize)
+        .unwrap_or_default();
+    if here.starts_with(&target) {
+        return Err(InputError::new(
+            out,
+            "is the working folder or one above it: --force will not replace it",
+        )
+        .into());
+    }
+    for input in inputs {
+        let input = std::fs::canonicalize(input).unwrap_or_else(|_| input.to_path_buf());
+        if input.starts_with(&target) {
+            return Err(InputError::new(
+                out,
+                format!(
+                    "holds an input ({}): --force will not replace it",
+                    input.display()
+                ),
+            )
+            .into());
+        }
+    }
+    let earlier_output = ["ct.json", "structures.json", "scene.json"]
+        .iter()
+        .any(|f| target.join(f).is_file());
+    if !earlier_output {
+        return Err(InputError::new(
+            out,
+            "is not an earlier endofuse output (no ct.json or scene.json): --force replaces only those",
         )
         .into());
     }
@@ -49,18 +89,33 @@ pub fn staging(out: &Path) -> Result<PathBuf, Error> {
     Ok(tmp)
 }
 
-/// Moves the staged folder onto `out` (replacing what is there).
+/// Moves the staged folder onto `out`. What was there is moved aside first and removed only
+/// once the new folder is in place, so a failed rename loses nothing.
 pub fn commit(tmp: &Path, out: &Path) -> Result<(), Error> {
-    if out.exists() {
-        std::fs::remove_dir_all(out).map_err(|source| Error::Remove {
+    let aside = tmp.with_extension("replaced");
+    let had_old = out.exists();
+    if had_old {
+        std::fs::rename(out, &aside).map_err(|source| Error::Write {
             path: out.to_path_buf(),
             source,
         })?;
     }
-    std::fs::rename(tmp, out).map_err(|source| Error::Write {
-        path: out.to_path_buf(),
-        source,
-    })
+    if let Err(source) = std::fs::rename(tmp, out) {
+        if had_old {
+            let _ = std::fs::rename(&aside, out);
+        }
+        return Err(Error::Write {
+            path: out.to_path_buf(),
+            source,
+        });
+    }
+    if had_old {
+        std::fs::remove_dir_all(&aside).map_err(|source| Error::Remove {
+            path: aside,
+            source,
+        })?;
+    }
+    Ok(())
 }
 
 /// The scene.json entries of the imported structures, paths relative to the output folder.
@@ -149,6 +204,15 @@ pub fn read_structures_dir(dir: &Path) -> Result<Vec<FolderStructure>, InputErro
         if entries.is_empty() {
             return Err(InputError::new(&listed, "lists no structures"));
         }
+        if let Some(e) = entries.iter().find(|e| !(1..=254).contains(&e.label)) {
+            return Err(InputError::new(
+                &listed,
+                format!(
+                    "'{}' has label {}: labels are 1–254 (0 is background, 255 background seeds)",
+                    e.name, e.label
+                ),
+            ));
+        }
         return entries
             .into_iter()
             .map(|entry| {
@@ -192,6 +256,9 @@ pub fn read_structures_dir(dir: &Path) -> Result<Vec<FolderStructure>, InputErro
         ));
     }
     let mut out = Vec::new();
+    if found.len() > 254 {
+        return Err(InputError::new(&base, "more than 254 structures"));
+    }
     for (label, (stem, path)) in (1u8..).zip(found) {
         let mesh = crate::geometry::mesh_io::load_mesh(&path)?;
         let cat = base.join(format!("{stem}_catalog"));

@@ -88,9 +88,13 @@ impl LabelVolume {
 
 /// Reads a label volume. Gzip is recognised by its magic bytes, not only by the name.
 pub fn read(path: &Path) -> Result<LabelVolume, VolumeError> {
-    let head = std::fs::read(path)
-        .map(|b| b.into_iter().take(2).collect::<Vec<u8>>())
-        .map_err(|e| VolumeError::Read(e.to_string()))?;
+    let mut head = Vec::new();
+    {
+        use std::io::Read;
+        std::fs::File::open(path)
+            .and_then(|f| f.take(2).read_to_end(&mut head))
+            .map_err(|e| VolumeError::Read(e.to_string()))?;
+    }
     let gz_name = path
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("gz"));

@@ -188,9 +188,10 @@ impl NewSceneForm {
             views: if self.side_by_side {
                 Views::SideBySide(p(Field::SideBySide))
             } else {
+                // In the calibration's camera order, whatever it names them.
                 Views::PerCamera(vec![
-                    ("left".into(), p(Field::Left)),
-                    ("right".into(), p(Field::Right)),
+                    (String::new(), p(Field::Left)),
+                    (String::new(), p(Field::Right)),
                 ])
             },
             copy_frames: self.copy_frames,
@@ -228,15 +229,24 @@ impl NewSceneForm {
                 used = true;
             }
             [a, b, ..] => {
-                // A file that says "right" is the right camera; otherwise by name order.
-                let (l, r) = if a.to_string_lossy().to_lowercase().contains("right") {
-                    (b, a)
-                } else {
-                    (a, b)
+                // By file name: one that says "right" (or "left") is that camera; otherwise
+                // the names' order.
+                let name = |p: &PathBuf| {
+                    p.file_name()
+                        .map(|n| n.to_string_lossy().to_lowercase())
+                        .unwrap_or_default()
                 };
+                let mut pair = [*a, *b];
+                pair.sort_by_key(|p| name(p));
+                let says = |p: &PathBuf, w: &str| name(p).contains(w);
+                if (says(pair[0], "right") && !says(pair[1], "right"))
+                    || (says(pair[1], "left") && !says(pair[0], "left"))
+                {
+                    pair.swap(0, 1);
+                }
                 self.side_by_side = false;
-                self.set(Field::Left, l);
-                self.set(Field::Right, r);
+                self.set(Field::Left, pair[0]);
+                self.set(Field::Right, pair[1]);
                 used = true;
             }
         }
@@ -442,4 +452,30 @@ fn row(shown: &Shown, f: &mut NewSceneForm, ui: &mut egui::Ui, field: Field) {
         shown.commands.send(AppCommand::BrowseNewScene(field));
     }
     ui.end_row();
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn dropped_files_fill_the_right_fields() {
+        let mut f = NewSceneForm::default();
+        let p = |s: &str| PathBuf::from(s);
+        // "right" in a folder name says nothing; file names decide, then their order.
+        assert!(
+            f.fill_from_dropped(&[p("/data/albright/right.mp4"), p("/data/albright/left.mp4")])
+        );
+        assert_eq!(f.value(Field::Left), "/data/albright/left.mp4");
+        assert_eq!(f.value(Field::Right), "/data/albright/right.mp4");
+        assert!(f.fill_from_dropped(&[p("/d/cam_b.mkv"), p("/d/cam_a.mkv")]));
+        assert_eq!(f.value(Field::Left), "/d/cam_a.mkv");
+        assert!(!f.side_by_side);
+        assert!(f.fill_from_dropped(&[p("/d/stereo.mp4"), p("/d/case.nii.gz"), p("/d/calib.yml")]));
+        assert!(f.side_by_side && f.from_ct);
+        assert_eq!(f.value(Field::SideBySide), "/d/stereo.mp4");
+        assert_eq!(f.value(Field::Ct), "/d/case.nii.gz");
+        assert_eq!(f.value(Field::Calibration), "/d/calib.yml");
+        assert!(!f.fill_from_dropped(&[p("/d/notes.pdf")]));
+    }
 }

@@ -345,7 +345,11 @@ fn facing_transform(given: &[(String, u8, bool, Mesh)]) -> Affine {
         .iter()
         .skip(1)
         .filter(|s| s.2)
-        .max_by_key(|s| s.3.vertices.len())
+        .max_by(|a, b| {
+            a.3.signed_volume()
+                .abs()
+                .total_cmp(&b.3.signed_volume().abs())
+        })
         .map(|s| (s.3.vertex_mean() - centre).normalize_or_zero())
         .filter(|d| *d != DVec3::ZERO);
     let turn = match facing {
