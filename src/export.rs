@@ -105,7 +105,55 @@ pub fn export_results(
             centroids: rendered.centroids,
         })?;
     }
-    recorder.finish(forest_train_s)
+    let metrics = recorder.finish(forest_train_s)?;
+    let marker = dir.join(EXPORT_MARKER);
+    std::fs::write(
+        &marker,
+        "written by endofuse File → Export; a later export may replace this folder\n",
+    )
+    .map_err(|source| Error::Write {
+        path: marker,
+        source,
+    })?;
+    Ok(metrics)
+}
+
+/// The file an export leaves in its folder, so that a later export may replace it and nothing
+/// else.
+pub const EXPORT_MARKER: &str = ".endofuse-export";
+
+/// What an export folder holds now.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ExportFolder {
+    /// Missing or empty: write.
+    Fresh,
+    /// An earlier export (its marker is there): replace it if the user says so.
+    EarlierExport,
+}
+
+/// Refuses a folder that holds anything but an earlier export (a mis-click on /usr/bin must
+/// not litter it).
+pub fn check_export_folder(dir: &Path) -> Result<ExportFolder, crate::error::InputError> {
+    if dir.is_file() {
+        return Err(crate::error::InputError::new(
+            dir,
+            "is a file, not a folder",
+        ));
+    }
+    let mut entries = match std::fs::read_dir(dir) {
+        Ok(e) => e,
+        Err(_) => return Ok(ExportFolder::Fresh),
+    };
+    if entries.next().is_none() {
+        return Ok(ExportFolder::Fresh);
+    }
+    if dir.join(EXPORT_MARKER).is_file() {
+        return Ok(ExportFolder::EarlierExport);
+    }
+    Err(crate::error::InputError::new(
+        dir,
+        "is not empty and holds no earlier endofuse export: choose an empty or new folder",
+    ))
 }
 
 /// An export the app hands the worker: everything it needs, owned.
@@ -143,5 +191,26 @@ impl ExportJob {
             self.forest_train_s,
             Some(resolved),
         )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_export_folder_must_be_empty_or_an_earlier_export() {
+        let dir = std::env::temp_dir().join(format!("endofuse-export-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        assert_eq!(check_export_folder(&dir), Ok(ExportFolder::Fresh));
+        std::fs::create_dir_all(&dir).unwrap();
+        assert_eq!(check_export_folder(&dir), Ok(ExportFolder::Fresh));
+        std::fs::write(dir.join("ls"), "a program").unwrap();
+        let err = check_export_folder(&dir).unwrap_err();
+        assert!(err.problem.contains("not empty"), "{err}");
+        std::fs::write(dir.join(EXPORT_MARKER), "").unwrap();
+        assert_eq!(check_export_folder(&dir), Ok(ExportFolder::EarlierExport));
+        assert!(check_export_folder(&dir.join("ls")).is_err());
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }

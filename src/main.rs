@@ -50,7 +50,8 @@ enum Command {
         #[arg(long)]
         out: PathBuf,
         /// R (rigid), L (affine), LS (affine + shape), LSC (+ camera intrinsics under zoom).
-        /// Default: the mode a --config metrics.json recorded, else LS.
+        /// Default: the mode a --config metrics.json recorded, else LSC (camera correction only
+        /// where a zoom change is marked or detected).
         #[arg(long)]
         mode: Option<String>,
         /// Inclusive 0-based frame range, e.g. 0..29 (default: all frames).
@@ -251,7 +252,7 @@ fn run(cli: Cli) -> Result<()> {
                         format!("'{m}' is not one of R, L, LS, LSC"),
                     )
                 })?,
-                None => recorded.mode.unwrap_or(endofuse::fit::Mode::LS),
+                None => recorded.mode.unwrap_or(endofuse::fit::Mode::LSC),
             };
             let config = recorded.config;
             let scene = endofuse::open::scene(&scene)?;

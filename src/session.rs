@@ -20,10 +20,11 @@ pub const SESSION_FORMAT: &str = "endofuse-session/1";
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct FitSettings {
-    /// R, L, LS or LSC.
+    /// R, L, LS or LSC. LSC by default: it corrects the cameras only where a zoom change is
+    /// marked or detected, so without a zoom it gives LS's result, and through one it keeps a
+    /// hidden tumour where LS would put it centimetres off. (Sessions of earlier versions
+    /// also carry `camera_correction`: ignored, the mode says it.)
     pub mode: String,
-    /// Let LSC correct the cameras inside zoom changes (off: LSC behaves as LS).
-    pub camera_correction: bool,
     pub trees: usize,
     /// Retrain shortly after the strokes change.
     pub live_update: bool,
@@ -32,8 +33,7 @@ pub struct FitSettings {
 impl Default for FitSettings {
     fn default() -> Self {
         Self {
-            mode: "LS".into(),
-            camera_correction: true,
+            mode: "LSC".into(),
             trees: 20,
             live_update: false,
         }

@@ -4,6 +4,7 @@
 
 use egui::{Event, Modifiers, PointerButton, Pos2, vec2};
 use egui_kittest::Harness;
+use egui_kittest::kittest::Queryable;
 use endofuse::app::actions::Action;
 use endofuse::app::{Dialogs, EndofuseApp, Tool};
 use std::path::{Path, PathBuf};
@@ -148,7 +149,15 @@ fn place_by_dragging_save_and_load_a_session_and_autosave() {
     h.state_mut().do_action(Action::Undo, &ctx);
     h.state_mut().doc.placement = None;
     assert_ne!(h.state().doc.editor.counts(), painted);
+    // Loading over unsaved work (the undo) asks first.
     h.state_mut().do_action(Action::LoadSession, &ctx);
+    assert!(matches!(
+        h.state().confirm,
+        Some(endofuse::app::confirm::Confirm::LoadSession(_))
+    ));
+    h.run_steps(2);
+    h.get_by_label("Load without saving").click();
+    h.run_steps(2);
     assert_eq!(
         h.state().doc.editor.counts(),
         painted,

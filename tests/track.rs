@@ -214,8 +214,25 @@ fn a_zoom_is_followed_by_focal_length_and_principal_point() {
         ],
     );
     let out = tmp("zoom-out");
-    track_ok(&scene, &out, &["--mode", "LSC"]);
+    // No --mode: LSC is the default (CONTRACT §1), so a zoom is followed without asking.
+    track_ok(&scene, &out, &[]);
     let m = json(&out.join("metrics.json"));
+    assert_eq!(m["mode"], "LSC");
+    // LS explains the zoom by depth and puts the hidden tumour further off.
+    let ls_out = tmp("zoom-out-ls");
+    track_ok(&scene, &ls_out, &["--mode", "LS"]);
+    let hidden = |m: &serde_json::Value| {
+        m["hidden"]["tumour_endo"]["centroid_error_mm_mean"]
+            .as_f64()
+            .unwrap()
+    };
+    let ls = json(&ls_out.join("metrics.json"));
+    assert!(
+        hidden(&m) < hidden(&ls),
+        "default {} mm, LS {} mm",
+        hidden(&m),
+        hidden(&ls)
+    );
     let cam = &m["camera"];
     assert!(cam["fx_rel_error_mean"].as_f64().unwrap() < 0.02, "{m}");
     assert!(cam["cx_error_px_mean"].as_f64().unwrap() < 1.0, "{m}");

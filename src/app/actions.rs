@@ -40,6 +40,8 @@ pub enum Action {
     PickClass(u8),
     /// Pan the views: drag while holding Space (or with the middle button).
     Pan,
+    /// The help sheet: every action and its shortcut, and the first steps.
+    Help,
 }
 
 /// Classes the number keys can pick (1 = background/tools, 2… the visible structures).
@@ -79,7 +81,7 @@ const fn cmd(k: Key) -> Option<KeyboardShortcut> {
 
 impl Action {
     /// In the order the key handler tries them (Redo before Undo: Ctrl+Shift+Z contains Ctrl+Z).
-    pub const ALL: [Action; 39] = [
+    pub const ALL: [Action; 40] = [
         Action::NewScene,
         Action::OpenScene,
         Action::OpenDemo,
@@ -119,6 +121,7 @@ impl Action {
         Action::PickClass(7),
         Action::PickClass(8),
         Action::Pan,
+        Action::Help,
     ];
 
     pub fn label(self) -> &'static str {
@@ -152,6 +155,7 @@ impl Action {
             Action::LastFrame => "Last frame",
             Action::ResetView => "Fit views to window",
             Action::Review => "Review plots",
+            Action::Help => "Help: shortcuts and first steps",
             Action::PickClass(k) => CLASS_LABELS.get(k as usize).copied().unwrap_or("Paint"),
             Action::Pan => "Pan views (hold and drag)",
         }
@@ -187,6 +191,7 @@ impl Action {
             Action::FirstFrame => key(Key::Home),
             Action::LastFrame => key(Key::End),
             Action::ResetView => key(Key::R),
+            Action::Help => key(Key::F1),
             Action::PickClass(k) => CLASS_KEYS.get(k as usize).copied().and_then(key),
             Action::OpenDemo
             | Action::SaveSeeds

@@ -29,6 +29,7 @@ pub enum AppCommand {
     SetSettings(FitSettings),
     SetStyle(usize, StructureStyle),
     SetReviewShown(bool),
+    SetHelpShown(bool),
     SetTransform(ViewTransform),
     /// Brush or eraser size times `factor`.
     ResizeBrush(f32),
@@ -94,8 +95,8 @@ impl EndofuseApp {
     pub fn apply(&mut self, command: AppCommand, ctx: &egui::Context) {
         match command {
             AppCommand::Action(a) => self.do_action(a, ctx),
-            AppCommand::OpenScene(spec) => self.open_scene(&spec),
-            AppCommand::LoadSession(path) => self.load_session_file(&path),
+            AppCommand::OpenScene(spec) => self.open_scene_asking(&spec),
+            AppCommand::LoadSession(path) => self.load_session_asking(path),
             AppCommand::SetFrame(t) => {
                 self.set_frame(t);
                 self.view.playing = false;
@@ -106,6 +107,7 @@ impl EndofuseApp {
             AppCommand::SetPrefs(p) => self.prefs = p,
             AppCommand::SetSettings(s) => {
                 if s != self.doc.settings {
+                    self.prefs.mode = s.mode.clone();
                     self.doc.settings = s;
                     self.doc.touch();
                 }
@@ -115,6 +117,7 @@ impl EndofuseApp {
                     *style = s;
                 }
             }
+            AppCommand::SetHelpShown(shown) => self.view.show_help = shown,
             AppCommand::SetReviewShown(shown) => self.view.show_review = shown,
             AppCommand::SetTransform(t) => self.view.transform = Some(t),
             AppCommand::ResizeBrush(factor) => self.resize_brush(factor),
@@ -172,13 +175,13 @@ impl EndofuseApp {
         match a {
             Action::OpenScene => {
                 if let Some(p) = self.files.dialogs.pick_scene() {
-                    self.open_scene(&p.display().to_string());
+                    self.open_scene_asking(&p.display().to_string());
                 }
             }
             Action::NewScene => {
                 self.screen.new_scene.get_or_insert_with(Default::default);
             }
-            Action::OpenDemo => self.open_scene(crate::open::DEMO),
+            Action::OpenDemo => self.open_scene_asking(crate::open::DEMO),
             Action::SaveSession => {
                 if let Some(p) = self.files.dialogs.save_session() {
                     self.save_session_to(&p);
@@ -186,7 +189,7 @@ impl EndofuseApp {
             }
             Action::LoadSession => {
                 if let Some(p) = self.files.dialogs.pick_session() {
-                    self.load_session_file(&p);
+                    self.load_session_asking(p);
                 }
             }
             Action::SaveSeeds => self.save_seed_pngs(),
@@ -231,6 +234,7 @@ impl EndofuseApp {
             Action::LastFrame => self.set_frame(frames - 1),
             Action::ResetView => self.view.transform = None,
             Action::Review => self.view.show_review = !self.view.show_review,
+            Action::Help => self.view.show_help = !self.view.show_help,
             Action::PickClass(k) => {
                 let classes = self.doc.classes.as_ref().map_or(0, |c| c.len());
                 if (k as usize) < classes {
@@ -253,7 +257,13 @@ impl EndofuseApp {
             Tool::Eraser => &mut self.prefs.eraser_px,
             _ => &mut self.prefs.brush_px,
         };
-        *r = (*r * factor).clamp(1.0, 200.0);
+        // Whole pixels above 10, tenths below: sizes a user reads and sets again.
+        let v = (*r * factor).clamp(1.0, 200.0);
+        *r = if v >= 10.0 {
+            v.round()
+        } else {
+            (v * 10.0).round() / 10.0
+        };
     }
 
     /// Moves to frame `t` (the user scrubbed: stop following the tracker).

@@ -149,6 +149,15 @@ impl EndofuseApp {
         self.files.autosave_offer = autosave.exists().then_some(autosave);
     }
 
+    /// The user chose to leave the current scene's unsaved work: its autosave goes too, so it
+    /// is not offered back as if it had been kept.
+    pub(super) fn forget_current_autosave(&mut self) {
+        let path = self.files.autosave_path(&self.doc.spec);
+        if let Err(e) = remove_if_present(&path) {
+            self.status.fail(e);
+        }
+    }
+
     pub(super) fn discard_autosave(&mut self) {
         if let Some(path) = self.files.autosave_offer.take()
             && let Err(e) = remove_if_present(&path)

@@ -243,14 +243,28 @@ impl EndofuseApp {
     /// Exports masks, overlay PNGs, trajectory.json and metrics.json of the tracked frames
     /// through the same writer as `endofuse track` (on the worker).
     pub(super) fn export(&mut self) {
-        let (Some(scene), Some(model)) = (self.doc.scene.clone(), self.doc.model.clone()) else {
+        if self.doc.scene.is_none() || self.doc.model.is_none() {
             return;
-        };
+        }
         if self.doc.results.is_empty() {
             self.status.fail("Nothing tracked yet to export.");
             return;
         }
         let Some(dir) = self.files.dialogs.pick_folder("Export tracking results to") else {
+            return;
+        };
+        match crate::export::check_export_folder(&dir) {
+            Ok(crate::export::ExportFolder::Fresh) => self.export_to(dir),
+            Ok(crate::export::ExportFolder::EarlierExport) => {
+                self.confirm = Some(super::confirm::Confirm::ReplaceExport(dir));
+            }
+            Err(e) => self.status.fail(e.to_string()),
+        }
+    }
+
+    /// Exports into `dir`, checked (or confirmed) already.
+    pub(super) fn export_to(&mut self, dir: std::path::PathBuf) {
+        let (Some(scene), Some(model)) = (self.doc.scene.clone(), self.doc.model.clone()) else {
             return;
         };
         let forest_train_s = self
@@ -350,7 +364,7 @@ impl EndofuseApp {
                     "Created {}: paint seeds on the first frames, train (T), then track (Ctrl+T).",
                     scene_json.display()
                 ));
-                self.open_scene(&scene_json.display().to_string());
+                self.open_scene_asking(&scene_json.display().to_string());
             }
             Event::Finished(task) => self.task_ended(task, true),
             Event::Cancelled(task) => {

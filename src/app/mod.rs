@@ -13,6 +13,7 @@
 
 pub mod actions;
 pub mod commands;
+pub mod confirm;
 pub mod files;
 pub mod frames;
 pub mod jobs;
@@ -44,6 +45,8 @@ pub struct EndofuseApp {
     pub screen: Screen,
     commands: CommandQueue,
     confirm_close: bool,
+    /// A question waiting for the user's answer (unsaved work, replacing an export).
+    pub confirm: Option<confirm::Confirm>,
     allow_close: bool,
 }
 
@@ -83,8 +86,12 @@ impl EndofuseApp {
             screen: Screen::new(gpu_overlay),
             commands: CommandQueue::default(),
             confirm_close: false,
+            confirm: None,
             allow_close: false,
         };
+        if crate::fit::Mode::parse(&app.prefs.mode).is_some() {
+            app.doc.settings.mode = app.prefs.mode.clone();
+        }
         if !app.screen.loader.running() {
             app.status
                 .fail("cannot start the thread that decodes frames: the views will stay empty");
@@ -102,7 +109,7 @@ impl EndofuseApp {
     /// (Space: pan) fires its action on release, unless the hold was used to drag.
     fn shortcuts(&mut self, ctx: &egui::Context) {
         // A text field or the close question has the keyboard.
-        if ctx.egui_wants_keyboard_input() || self.confirm_close {
+        if ctx.egui_wants_keyboard_input() || self.confirm_close || self.confirm.is_some() {
             return;
         }
         let held: Vec<egui::Key> = Action::ALL.iter().filter_map(|a| a.held_key()).collect();
@@ -126,8 +133,11 @@ impl EndofuseApp {
                     }
                     self.screen.stroke.panned_with_key = false;
                 }
-            } else if ctx.input_mut(|i| i.consume_shortcut(&s)) {
-                self.send(AppCommand::Action(a));
+            } else {
+                // Every press of the frame, not one: quick repeated steps are not dropped.
+                while ctx.input_mut(|i| i.consume_shortcut(&s)) {
+                    self.send(AppCommand::Action(a));
+                }
             }
         }
     }
@@ -195,8 +205,12 @@ impl eframe::App for EndofuseApp {
                 panels::review::review_window(&shown, &ctx);
             }
             panels::new_scene::window(&shown, &mut self.screen.new_scene, &ctx);
+            if shown.view.show_help {
+                panels::help::help_window(&shown, &ctx);
+            }
         }
         self.apply_commands(&ctx);
+        self.confirm_modal(&ctx);
         self.close_guard(&ctx);
     }
 

@@ -31,6 +31,8 @@ pub struct Prefs {
     pub overlay_opacity: f32,
     pub show_seeds: bool,
     pub show_overlay: bool,
+    /// The fit mode last chosen (R, L, LS, LSC), kept between runs.
+    pub mode: String,
 }
 
 impl Default for Prefs {
@@ -44,6 +46,7 @@ impl Default for Prefs {
             overlay_opacity: 0.3,
             show_seeds: true,
             show_overlay: true,
+            mode: "LSC".into(),
         }
     }
 }
@@ -142,12 +145,9 @@ impl Document {
         }
     }
 
-    /// The mode tracking runs in: the settings' mode, LS when LSC's camera correction is off.
+    /// The mode tracking runs in (LSC when the settings name none it knows).
     pub fn mode(&self) -> Mode {
-        match Mode::parse(&self.settings.mode).unwrap_or(Mode::LS) {
-            Mode::LSC if !self.settings.camera_correction => Mode::LS,
-            m => m,
-        }
+        Mode::parse(&self.settings.mode).unwrap_or(Mode::LSC)
     }
 
     /// The state drawn at frame `t`: its fit, else the placement (mean shape, calibration).
@@ -211,6 +211,8 @@ pub struct ViewState {
     pub layer: Layer,
     pub styles: Vec<StructureStyle>,
     pub show_review: bool,
+    /// The help sheet is open.
+    pub show_help: bool,
 }
 
 impl Default for ViewState {
@@ -228,6 +230,7 @@ impl Default for ViewState {
             layer: Layer::Image,
             styles: Vec::new(),
             show_review: false,
+            show_help: false,
         }
     }
 }
@@ -248,7 +251,10 @@ impl Status {
         self.error = Some(message);
     }
 
+    /// A job starts: the previous job's notice ("Model placed…", "Exported to …") no longer
+    /// describes what is on screen.
     pub fn busy_with(&mut self, task: Task, what: String, total: usize) {
+        self.notice = None;
         self.busy = Some(Busy {
             task,
             what,

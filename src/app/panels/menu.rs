@@ -62,6 +62,9 @@ pub fn menu_bar(shown: &Shown, ui: &mut egui::Ui) {
                 menu_item(shown, ui, Action::FirstFrame);
                 menu_item(shown, ui, Action::LastFrame);
             });
+            ui.menu_button("Help", |ui| {
+                menu_item(shown, ui, Action::Help);
+            });
             ui.with_layout(egui::Layout::right_to_left(egui::Align::Center), |ui| {
                 let spec = &shown.doc.spec;
                 let name = if spec == crate::open::DEMO {

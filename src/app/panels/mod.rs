@@ -3,6 +3,7 @@
 //! plots over time ([`review`]). They read the app's state and send commands; none of them
 //! changes a field.
 
+pub mod help;
 pub mod menu;
 pub mod new_scene;
 pub mod review;

@@ -82,13 +82,15 @@ fn side_contents(shown: &Shown, ui: &mut egui::Ui) {
     ui.add(
         egui::Slider::new(&mut prefs.brush_px, 1.0..=80.0)
             .text("brush px")
-            .logarithmic(true),
+            .logarithmic(true)
+            .max_decimals(1),
     )
     .on_hover_text("[ and ], or Shift+wheel");
     ui.add(
         egui::Slider::new(&mut prefs.eraser_px, 1.0..=120.0)
             .text("eraser px")
-            .logarithmic(true),
+            .logarithmic(true)
+            .max_decimals(1),
     );
     let mut overwrite = view.overwrite;
     if ui
@@ -202,14 +204,17 @@ fn side_contents(shown: &Shown, ui: &mut egui::Ui) {
                 ("R", "rigid pose"),
                 ("L", "affine pose"),
                 ("LS", "affine + shape"),
-                ("LSC", "affine + shape + cameras"),
+                ("LSC", "affine + shape + cameras under zoom (default)"),
             ] {
                 ui.selectable_value(&mut settings.mode, m.to_string(), format!("{m}: {what}"));
             }
         });
-    ui.checkbox(
-        &mut settings.camera_correction,
-        "camera correction inside zoom changes",
+    ui.label(
+        RichText::new(
+            "LSC corrects the cameras only where a zoom change is marked or detected; elsewhere it fits as LS.",
+        )
+        .weak()
+        .small(),
     );
     let trained = doc.appearance.is_some();
     ui.horizontal_wrapped(|ui| {
@@ -225,21 +230,6 @@ fn side_contents(shown: &Shown, ui: &mut egui::Ui) {
         action_button(shown, ui, Action::Track, idle && trained);
         action_button(shown, ui, Action::Review, true);
     });
-    if let Some(path) = &shown.files.autosave_offer {
-        ui.separator();
-        ui.colored_label(
-            Color32::from_rgb(255, 200, 80),
-            "Autosaved work from an earlier run was found.",
-        );
-        ui.horizontal(|ui| {
-            if ui.button("Restore").clicked() {
-                send(AppCommand::LoadSession(path.clone()));
-            }
-            if ui.button("Discard").clicked() {
-                send(AppCommand::DiscardAutosave);
-            }
-        });
-    }
     if prefs != *shown.prefs {
         send(AppCommand::SetPrefs(prefs));
     }

@@ -140,7 +140,18 @@ pub fn views(shown: &Shown, screen: &mut Screen, ui: &mut egui::Ui) {
             egui::FontId::proportional(13.0),
             Color32::from_gray(230),
         );
-        if let Some(r) = shown.doc.results.get(&view.frame)
+        let fitted = shown.doc.results.get(&view.frame);
+        if fitted.is_none() && shown.doc.placement.is_some() {
+            // The model drawn here is where it was placed, not a fit of this frame.
+            painter.text(
+                rect.right_top() + vec2(-6.0, 4.0),
+                egui::Align2::RIGHT_TOP,
+                "NOT FITTED: showing the placed pose",
+                egui::FontId::proportional(13.0),
+                Color32::from_rgb(255, 190, 70),
+            );
+        }
+        if let Some(r) = fitted
             && r.lost
         {
             painter.text(
