@@ -52,6 +52,10 @@ pub struct FrameResult {
     /// Dice per visible structure and camera against ground truth, when it exists.
     #[serde(default)]
     pub dice: Vec<(String, f64)>,
+    /// Distance of each hidden structure's fitted centroid from the true one (mm), when the
+    /// scene has a ground-truth trajectory: what a good Dice cannot show.
+    #[serde(default)]
+    pub hidden_error_mm: Vec<(String, f64)>,
 }
 
 /// One painted view and frame, run-length coded: (run length, seed value).

@@ -147,6 +147,25 @@ fn paint_train_track_scrub_and_review_the_demo() {
         !dice.is_empty() && dice.iter().all(|&d| d > 0.8),
         "Dice {dice:?}"
     );
+    // The hidden tumour's error against the demo's truth, per frame and in the summary
+    // (LSC, the default mode): a good Dice says nothing about it.
+    let hidden: Vec<f64> = h
+        .state()
+        .doc
+        .results
+        .values()
+        .flat_map(|r| r.hidden_error_mm.iter().map(|(_, e)| *e))
+        .collect();
+    assert_eq!(hidden.len(), 6, "one hidden error per tracked frame");
+    assert!(
+        hidden.iter().all(|&e| e < 6.0),
+        "hidden tumour errors {hidden:?} mm"
+    );
+    let notice = h.state().status.notice.clone().unwrap_or_default();
+    assert!(
+        notice.contains("mode LSC") && notice.contains("tumour_endo") && notice.contains("mm off"),
+        "{notice}"
+    );
     h.state_mut().status.notice = None;
     move_to(&mut h, pos2(5.0, SIZE[1] - 5.0));
     shoot(&mut h, "app_overlay_hidden_tumour");

@@ -338,6 +338,7 @@ impl EndofuseApp {
                     lost: f.lost,
                     ms: f.ms,
                     dice: Vec::new(),
+                    hidden_error_mm: self.hidden_errors(&f),
                 };
                 if self.view.follow_tracking {
                     self.view.frame = f.frame;
@@ -385,6 +386,32 @@ impl EndofuseApp {
         ctx.request_repaint();
     }
 
+    /// Each hidden structure's centroid error at a tracked frame, against the scene's
+    /// ground-truth trajectory (none without one).
+    fn hidden_errors(&self, f: &crate::fit::tracker::TrackedFrame) -> Vec<(String, f64)> {
+        let Some(scene) = self.doc.scene.as_ref() else {
+            return Vec::new();
+        };
+        let Some(truth) = scene
+            .ground_truth
+            .trajectory
+            .as_ref()
+            .and_then(|t| t.get(f.frame))
+        else {
+            return Vec::new();
+        };
+        scene
+            .structures
+            .iter()
+            .filter(|s| !s.visible)
+            .filter_map(|s| {
+                let fitted = f.centroids.iter().find(|(n, _)| *n == s.name)?.1;
+                let true_c = glam::DVec3::from_array(*truth.centroids.get(&s.name)?);
+                Some((s.name.clone(), (fitted - true_c).length()))
+            })
+            .collect()
+    }
+
     /// Bookkeeping when the worker ends `task`, however it ended (`finished`: it completed).
     fn task_ended(&mut self, task: Task, finished: bool) {
         if let Some(busy) = self.status.busy.take_if(|b| b.task == task)
@@ -392,10 +419,33 @@ impl EndofuseApp {
             && task == Task::Track
         {
             let lost = self.doc.results.values().filter(|r| r.lost).count();
+            // Where ground truth exists, the hidden structures' error goes in the summary:
+            // a good Dice says nothing about them.
+            let mut hidden: std::collections::BTreeMap<&str, (f64, f64, usize)> =
+                Default::default();
+            for r in self.doc.results.values() {
+                for (name, e) in &r.hidden_error_mm {
+                    let h = hidden.entry(name).or_insert((0.0, 0.0, 0));
+                    h.0 += e;
+                    h.1 = h.1.max(*e);
+                    h.2 += 1;
+                }
+            }
+            let hidden: Vec<String> = hidden
+                .iter()
+                .map(|(n, (sum, max, k))| {
+                    format!(
+                        "; {n} {:.1} mm off on average (max {max:.1})",
+                        sum / *k as f64
+                    )
+                })
+                .collect();
             self.status.notice = Some(format!(
-                "Fitted {} frame{} ({lost} of all fitted frames lost).",
+                "Fitted {} frame{} in mode {} ({lost} of all fitted frames lost){}.",
                 busy.total,
-                if busy.total == 1 { "" } else { "s" }
+                if busy.total == 1 { "" } else { "s" },
+                self.doc.mode().name(),
+                hidden.concat()
             ));
         }
         match task {

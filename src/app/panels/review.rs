@@ -61,6 +61,28 @@ pub fn review_window(shown: &Shown, ctx: &egui::Context) {
                     p.line(Line::new("confidence", PlotPoints::from(conf)));
                     p.vline(VLine::new("frame", frame));
                 });
+            let mut hidden: std::collections::BTreeMap<String, Vec<[f64; 2]>> = Default::default();
+            for r in doc.results.values() {
+                for (name, e) in &r.hidden_error_mm {
+                    hidden
+                        .entry(name.clone())
+                        .or_default()
+                        .push([r.frame as f64, *e]);
+                }
+            }
+            if !hidden.is_empty() {
+                ui.label("Hidden structures: centroid error against ground truth (mm)");
+                Plot::new("hidden")
+                    .height(110.0)
+                    .legend(Legend::default().position(egui_plot::Corner::LeftTop))
+                    .include_y(0.0)
+                    .show(ui, |p| {
+                        for (name, pts) in &hidden {
+                            p.line(Line::new(name.clone(), PlotPoints::from(pts.clone())));
+                        }
+                        p.vline(VLine::new("frame", frame));
+                    });
+            }
             ui.label("Focal length fx per camera (px); dashed: ground truth");
             Plot::new("fx")
                 .height(130.0)

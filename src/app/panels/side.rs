@@ -176,26 +176,6 @@ fn side_contents(shown: &Shown, ui: &mut egui::Ui) {
     ui.add(egui::Slider::new(&mut prefs.probability_opacity, 0.0..=1.0).text("map opacity"));
 
     ui.separator();
-    ui.heading("Structures");
-    ui.checkbox(&mut prefs.show_overlay, "show fitted overlay");
-    for (i, (s, style)) in scene.structures.iter().zip(&view.styles).enumerate() {
-        let mut edited = *style;
-        ui.horizontal(|ui| {
-            swatch(ui, structure_colour(i));
-            let name = if s.visible {
-                s.name.clone()
-            } else {
-                format!("{} (hidden)", s.name)
-            };
-            ui.checkbox(&mut edited.shown, name);
-        });
-        ui.add(egui::Slider::new(&mut edited.opacity, 0.0..=1.0).text("fill"));
-        if edited != *style {
-            send(AppCommand::SetStyle(i, edited));
-        }
-    }
-
-    ui.separator();
     ui.heading("Fit");
     egui::ComboBox::from_label("mode")
         .selected_text(settings.mode.clone())
@@ -230,6 +210,30 @@ fn side_contents(shown: &Shown, ui: &mut egui::Ui) {
         action_button(shown, ui, Action::Track, idle && trained);
         action_button(shown, ui, Action::Review, true);
     });
+    ui.separator();
+    // How the overlay is drawn comes after the workflow (seeds, forest, fit): the main path
+    // fits the window without scrolling.
+    egui::CollapsingHeader::new(RichText::new("Structures").heading())
+        .default_open(false)
+        .show(ui, |ui| {
+            ui.checkbox(&mut prefs.show_overlay, "show fitted overlay");
+            for (i, (s, style)) in scene.structures.iter().zip(&view.styles).enumerate() {
+                let mut edited = *style;
+                ui.horizontal(|ui| {
+                    swatch(ui, structure_colour(i));
+                    let name = if s.visible {
+                        s.name.clone()
+                    } else {
+                        format!("{} (hidden)", s.name)
+                    };
+                    ui.checkbox(&mut edited.shown, name);
+                });
+                ui.add(egui::Slider::new(&mut edited.opacity, 0.0..=1.0).text("fill"));
+                if edited != *style {
+                    send(AppCommand::SetStyle(i, edited));
+                }
+            }
+        });
     if prefs != *shown.prefs {
         send(AppCommand::SetPrefs(prefs));
     }

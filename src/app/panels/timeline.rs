@@ -22,7 +22,8 @@ pub fn timeline(shown: &Shown, layout: &mut Layout, ui: &mut egui::Ui) {
             ui.allocate_exact_size(vec2(ui.available_width(), 46.0), Sense::click_and_drag());
         layout.timeline = Some(rect);
         let painter = ui.painter_at(rect);
-        painter.rect_filled(rect, 3.0, Color32::from_gray(28));
+        // Darker than the panel, so the timeline's own end is visible.
+        painter.rect_filled(rect, 3.0, Color32::from_gray(14));
         let w = rect.width() / n as f32;
         for t in 0..n {
             let x0 = rect.left() + t as f32 * w;
@@ -57,6 +58,30 @@ pub fn timeline(shown: &Shown, layout: &mut Layout, ui: &mut egui::Ui) {
                 painter.rect_filled(bar.shrink2(vec2((w * 0.1).min(1.0), 0.0)), 0.0, col);
             }
         }
+        // Frame numbers at a step that leaves ~70 px between labels (1, 2, 5 × 10^k), and the
+        // last frame, so the range outline does not read as the video's end.
+        let step = [1usize, 2, 5]
+            .iter()
+            .flat_map(|&m| (0..7).map(move |k| m * 10usize.pow(k)))
+            .filter(|&s| s as f32 * w >= 70.0)
+            .min()
+            .unwrap_or(n);
+        let label = |t: usize| {
+            let x = rect.left() + (t as f32 + 0.5) * w;
+            painter.text(
+                pos2(x, rect.top() + 6.0),
+                egui::Align2::CENTER_TOP,
+                t.to_string(),
+                egui::FontId::proportional(10.0),
+                Color32::from_gray(150),
+            );
+        };
+        for t in (0..n).step_by(step.max(1)) {
+            if n - 1 - t >= step / 2 || t == 0 {
+                label(t);
+            }
+        }
+        label(n - 1);
         let (a, b) = view.track_range;
         let xa = rect.left() + a as f32 * w;
         let xb = rect.left() + (b + 1) as f32 * w;
