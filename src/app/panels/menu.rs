@@ -94,7 +94,7 @@ pub fn status_bar(shown: &Shown, ui: &mut egui::Ui) {
                 }
                 action_button(shown, ui, Action::Cancel, true);
             } else {
-                ui.label(RichText::new("Ready").weak());
+                ui.label(RichText::new(next_step(shown.doc)).weak());
             }
             if let Some(e) = &shown.status.error {
                 ui.separator();
@@ -108,4 +108,26 @@ pub fn status_bar(shown: &Shown, ui: &mut egui::Ui) {
             }
         });
     });
+}
+
+/// What to do next, following the workflow (the first-run hint of the status bar).
+pub fn next_step(doc: &crate::app::Document) -> &'static str {
+    let Some(scene) = doc.scene.as_ref() else {
+        return "Ready. Next: open a scene (File > Open or File > New scene).";
+    };
+    let painted = doc.editor.counts();
+    let classes = scene.visible_structures().count() + 1;
+    if painted.len() < classes {
+        return "Next: paint seeds on the first frames: 1 background and tools, 2, 3, ... each visible structure (B brush).";
+    }
+    if doc.appearance.is_none() {
+        return "Next: train the forest (T), then check the probability view (P).";
+    }
+    if doc.results.is_empty() {
+        return "Next: place the model (M or Place automatically) and fit this frame (F).";
+    }
+    if doc.results.len() < scene.frame_count {
+        return "Next: track (Ctrl+T); frames not fitted yet say so in the views.";
+    }
+    "Next: review the plots (View > Review plots), export (Ctrl+E) and save the session (Ctrl+S)."
 }
