@@ -40,6 +40,9 @@ fn unsaved_work_is_asked_about_and_help_lists_every_action() {
         "LSC is the default mode"
     );
     assert!(!h.state().doc.unsaved());
+    // The status bar says what to do next: the demo comes with seeds, so train.
+    let hint = endofuse::app::panels::menu::next_step(&h.state().doc);
+    assert!(hint.contains("train the forest"), "{hint}");
 
     // Some work: a setting changed (a session keeps it).
     let mut settings = h.state().doc.settings.clone();
