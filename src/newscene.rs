@@ -105,10 +105,6 @@ struct View {
     copies: Vec<(PathBuf, String)>,
 }
 
-fn absolute(p: &Path) -> PathBuf {
-    std::fs::canonicalize(p).unwrap_or_else(|_| p.to_path_buf())
-}
-
 /// A video file: probed; with `copy`, it will be copied as `NAME.ext` in the scene.
 fn video_view(path: &Path, name: &str, copy: bool) -> Result<View, InputError> {
     let info = video::probe(path).map_err(crate::scene::frames::video_input_error)?;
@@ -120,7 +116,10 @@ fn video_view(path: &Path, name: &str, copy: bool) -> Result<View, InputError> {
     let (frames, copies) = if copy {
         (inside.clone(), vec![(path.to_path_buf(), inside)])
     } else {
-        (absolute(path).to_string_lossy().to_string(), Vec::new())
+        (
+            output::canonical(path).to_string_lossy().to_string(),
+            Vec::new(),
+        )
     };
     Ok(View {
         source: path.to_path_buf(),
@@ -205,7 +204,10 @@ fn folder_view(dir: &Path, name: &str, copy: bool) -> Result<View, InputError> {
     } else {
         let template = format!("{prefix}{{frame:0{width}}}{suffix}");
         (
-            absolute(dir).join(template).to_string_lossy().to_string(),
+            output::canonical(dir)
+                .join(template)
+                .to_string_lossy()
+                .to_string(),
             Vec::new(),
         )
     };
@@ -444,12 +446,7 @@ fn assemble(
     // The anatomy.
     let (entries, kidney, ct): (Vec<StructureEntry>, _, _) = match &options.anatomy {
         Anatomy::Ct { labels, options: o } => {
-            progress("meshing the CT labels");
-            let vol = ctimport::volume::read(labels)
-                .map_err(|e| InputError::new(labels, e.to_string()))?;
-            let mut report = ctimport::build(&vol, o, &|stage| progress(stage))
-                .map_err(|p| InputError::new(labels, p))?;
-            report.source = labels.display().to_string();
+            let report = ctimport::read_and_build(labels, o, progress)?;
             progress("writing meshes and the deformation catalog");
             output::write_into(dir, &report, o)?;
             let kidney = report.structures[0].mesh.clone();

@@ -87,11 +87,18 @@ pub fn components(dims: [usize; 3], inside: impl Fn(usize) -> bool) -> (Vec<u32>
     (id, sizes)
 }
 
+/// The (i, j, k) of flat index `n` on a grid of `dims` (i fastest, as NIfTI stores it).
+pub fn unflatten(dims: [usize; 3], n: usize) -> [usize; 3] {
+    [
+        n % dims[0],
+        (n / dims[0]) % dims[1],
+        n / (dims[0] * dims[1]),
+    ]
+}
+
 /// The up to six face neighbours of voxel `n`.
 pub fn neighbours6(dims: [usize; 3], n: usize) -> impl Iterator<Item = usize> {
-    let i = n % dims[0];
-    let j = (n / dims[0]) % dims[1];
-    let k = n / (dims[0] * dims[1]);
+    let [i, j, k] = unflatten(dims, n);
     let (sx, sy) = (1, dims[0]);
     let sz = dims[0] * dims[1];
     [

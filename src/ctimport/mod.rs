@@ -190,12 +190,22 @@ pub fn import_ct(
     progress: &dyn Fn(&str),
 ) -> Result<ImportReport, Error> {
     output::check_target(out, options.force, &[labels])?;
+    let report = read_and_build(labels, options, progress)?;
+    progress("writing meshes and the deformation catalog");
+    output::write(out, &report, options)?;
+    Ok(report)
+}
+
+/// Reads the label file and builds its structures; errors name the file.
+pub fn read_and_build(
+    labels: &Path,
+    options: &ImportOptions,
+    progress: &dyn Fn(&str),
+) -> Result<ImportReport, InputError> {
     progress("reading the label volume");
     let vol = volume::read(labels).map_err(|e| InputError::new(labels, e.to_string()))?;
     let mut report = build(&vol, options, progress).map_err(|p| InputError::new(labels, p))?;
     report.source = labels.display().to_string();
-    progress("writing meshes and the deformation catalog");
-    output::write(out, &report, options)?;
     Ok(report)
 }
 
@@ -211,19 +221,12 @@ pub fn build(
         options.tumour_label,
         options.cyst_label,
     );
-    let mut present = std::collections::BTreeMap::new();
-    for &v in &vol.labels {
-        *present.entry(v).or_insert(0usize) += 1;
-    }
-    if present.keys().all(|&v| v == 0) {
+    let present = vol.labels_present();
+    if present.is_empty() {
         return Err("the volume is all background (no labelled voxel)".into());
     }
-    if !present.contains_key(&kl) {
-        let found: Vec<String> = present
-            .keys()
-            .filter(|&&v| v != 0)
-            .map(|v| v.to_string())
-            .collect();
+    if !present.contains(&kl) {
+        let found: Vec<String> = present.iter().map(|v| v.to_string()).collect();
         return Err(format!(
             "no voxel has the kidney label {kl} (labels present: {}); use --labels kidney=N,tumour=M",
             found.join(", ")
@@ -246,7 +249,7 @@ pub fn build(
         if o == u32::MAX {
             continue;
         }
-        let ijk = block.local(n);
+        let ijk = mask::unflatten(block.dims, n);
         organs[o as usize].add(ijk, vol.world(block.ijk(n)), label_at(n) == kl);
         let t = tumour_id[n];
         if t != u32::MAX {
@@ -336,7 +339,7 @@ pub fn build(
     let mut exophytic = vec![false; tumour_sizes.len()];
     let (mut n_exo, mut n_endo) = (0, 0);
     let mut tumour_masks = Vec::new();
-    for (k, &(t, n)) in tumours.iter().enumerate() {
+    for (k, &(t, _)) in tumours.iter().enumerate() {
         let bounds = &tumour_bounds[t as usize];
         let exposure = exposure(&block, bounds, &tumour_id, t, &organ_id, chosen, face_area);
         let visible = exposure.exposed_share >= EXPOSED_SHARE;
@@ -354,7 +357,7 @@ pub fn build(
         };
         exophytic[t as usize] = visible;
         let m = block.mask_in(bounds, |x| tumour_id[x] == t);
-        tumour_masks.push((name, (k + 2) as u8, visible, n, exposure, m));
+        tumour_masks.push((name, (k + 2) as u8, visible, exposure, m));
     }
     let kidney_mask = block.mask_in(&organs[chosen as usize], |x| {
         organ_id[x] == chosen && (tumour_id[x] == u32::MAX || !exophytic[tumour_id[x] as usize])
@@ -362,26 +365,22 @@ pub fn build(
     // The component maps are done with: free them before meshing.
     drop((organ_id, tumour_id));
     progress("meshing the kidney");
-    let kidney_voxels = kidney_mask.count();
     if let Some(edge) = touches_volume_edge(&kidney_mask, vol.dims) {
         notes.push(format!(
             "the kidney reaches the scan's edge ({edge}): its surface there is the field of view's cut, not anatomy"
         ));
     }
-    let mut kidney = mesh_structure(
+    structures.push(mesh_structure(
         "kidney",
         1,
         true,
         kidney_mask,
-        kidney_voxels,
         vol,
         options.kidney_vertices,
-    )?;
-    kidney.exposure = None;
-    structures.push(kidney);
-    for (name, label, visible, n, exposure, m) in tumour_masks {
+    )?);
+    for (name, label, visible, exposure, m) in tumour_masks {
         progress(&format!("meshing {name}"));
-        let mut s = mesh_structure(&name, label, visible, m, n, vol, options.tumour_vertices)?;
+        let mut s = mesh_structure(&name, label, visible, m, vol, options.tumour_vertices)?;
         s.exposure = Some(exposure);
         structures.push(s);
     }
@@ -572,13 +571,13 @@ fn mesh_structure(
     label: u8,
     visible: bool,
     m: Mask,
-    voxels: usize,
     vol: &LabelVolume,
     target_vertices: usize,
 ) -> Result<StructureReport, String> {
     let mut m = m.padded(2);
     let dropped = mask::keep_largest(&mut m);
-    let voxels = voxels - dropped;
+    // The structure's own voxels, before cavities and repairs add any.
+    let voxels = m.count();
     let mut added = mask::fill_cavities(&mut m);
     added += mask::make_well_composed(&mut m);
     let mut mesh = surface::extract(&m, vol);
@@ -658,9 +657,7 @@ fn mesh_structure(
     let offset = smooth::volume_restoring_offset(&mesh, voxel_volume_mm3);
     if offset.abs() <= max_offset_mm {
         let moved = smooth::offset_along_normals(&mesh, offset);
-        if surface::topology(&moved).is_closed_manifold()
-            && surface::self_intersections(&moved) == 0
-        {
+        if valid(&moved) {
             mesh = moved;
             normal_offset_mm = offset;
         }
@@ -695,11 +692,7 @@ fn touches_volume_edge(m: &Mask, dims: [usize; 3]) -> Option<String> {
         if !inside {
             continue;
         }
-        let local = [
-            n % m.dims[0],
-            (n / m.dims[0]) % m.dims[1],
-            n / (m.dims[0] * m.dims[1]),
-        ];
+        let local = mask::unflatten(m.dims, n);
         for a in 0..3 {
             let v = local[a] as isize + m.origin[a];
             if v == 0 || v == dims[a] as isize - 1 {
@@ -710,7 +703,7 @@ fn touches_volume_edge(m: &Mask, dims: [usize; 3]) -> Option<String> {
     None
 }
 
-/// The bounding block of some labels, with a voxel of margin, as a window on the volume.
+/// The bounding block of some labels, as a window on the volume.
 struct Block {
     dims: [usize; 3],
     origin: [usize; 3],
@@ -718,25 +711,20 @@ struct Block {
 }
 
 impl Block {
+    /// Block index `n` in the whole volume's voxels.
+    fn global(&self, n: usize) -> [usize; 3] {
+        let [i, j, k] = mask::unflatten(self.dims, n);
+        [i + self.origin[0], j + self.origin[1], k + self.origin[2]]
+    }
+
     fn volume_index(&self, n: usize) -> usize {
-        let d = self.dims;
-        let (i, j, k) = (n % d[0], (n / d[0]) % d[1], n / (d[0] * d[1]));
-        let v = self.volume_dims;
-        (i + self.origin[0]) + v[0] * ((j + self.origin[1]) + v[1] * (k + self.origin[2]))
+        let [i, j, k] = self.global(n);
+        i + self.volume_dims[0] * (j + self.volume_dims[1] * k)
     }
 
     fn ijk(&self, n: usize) -> DVec3 {
-        let d = self.dims;
-        DVec3::new(
-            (n % d[0] + self.origin[0]) as f64,
-            ((n / d[0]) % d[1] + self.origin[1]) as f64,
-            (n / (d[0] * d[1]) + self.origin[2]) as f64,
-        )
-    }
-
-    fn local(&self, n: usize) -> [usize; 3] {
-        let d = self.dims;
-        [n % d[0], (n / d[0]) % d[1], n / (d[0] * d[1])]
+        let [i, j, k] = self.global(n);
+        DVec3::new(i as f64, j as f64, k as f64)
     }
 
     /// The mask of `inside` (block indices) over the bounds of one component only.

@@ -10,6 +10,11 @@ use crate::geometry::mesh_io::write_obj;
 use crate::scene::format::StructureEntry;
 use std::path::{Path, PathBuf};
 
+/// The path with links and `..` resolved where it exists, as given otherwise.
+pub fn canonical(p: &Path) -> PathBuf {
+    std::fs::canonicalize(p).unwrap_or_else(|_| p.to_path_buf())
+}
+
 /// Refuses an output folder that exists and is not empty, unless `force` — and even then
 /// refuses what replacing would destroy beyond an earlier output: the working folder or one
 /// above it, a folder holding one of the `inputs`, or a folder that is not an endofuse output
@@ -29,7 +34,7 @@ pub fn check_target(out: &Path, force: bool, inputs: &[&Path]) -> Result<(), Err
         )
         .into());
     }
-    let target = std::fs::canonicalize(out).unwrap_or_else(|_| out.to_path_buf());
+    let target = canonical(out);
     let here = std::env::current_dir()
         .and_then(std::fs::canonicalize)
         .unwrap_or_default();
@@ -41,7 +46,7 @@ pub fn check_target(out: &Path, force: bool, inputs: &[&Path]) -> Result<(), Err
         .into());
     }
     for input in inputs {
-        let input = std::fs::canonicalize(input).unwrap_or_else(|_| input.to_path_buf());
+        let input = canonical(input);
         if input.starts_with(&target) {
             return Err(InputError::new(
                 out,

@@ -20,11 +20,7 @@ pub fn extract(mask: &Mask, vol: &LabelVolume) -> Mesh {
     let mut sdf = vec![1.0f32; shape.usize()];
     for (n, &inside) in mask.data.iter().enumerate() {
         if inside {
-            let [i, j, k] = [
-                n % mask.dims[0],
-                (n / mask.dims[0]) % mask.dims[1],
-                n / (mask.dims[0] * mask.dims[1]),
-            ];
+            let [i, j, k] = super::mask::unflatten(mask.dims, n);
             sdf[shape.linearize([i as u32, j as u32, k as u32]) as usize] = -1.0;
         }
     }

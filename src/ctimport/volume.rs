@@ -66,6 +66,18 @@ impl LabelVolume {
         i + self.dims[0] * (j + self.dims[1] * k)
     }
 
+    /// The labels other than 0 that occur, in increasing order.
+    pub fn labels_present(&self) -> Vec<u16> {
+        let mut seen = vec![false; 1 << 16];
+        for &l in &self.labels {
+            seen[l as usize] = true;
+        }
+        (1..seen.len())
+            .filter(|&l| seen[l])
+            .map(|l| l as u16)
+            .collect()
+    }
+
     /// Volume of one voxel, mm³.
     pub fn voxel_volume_mm3(&self) -> f64 {
         self.linear.determinant().abs()
