@@ -249,7 +249,18 @@ impl SeedEditor {
 
     /// Painted pixels per seed value over every view and frame.
     pub fn counts(&self) -> BTreeMap<u8, usize> {
-        self.seeds().pixel_counts()
+        // Drawn every frame (side panel, status bar): count in place rather than through a
+        // copy of every layer (`seeds()`); the same figures as `Seeds::pixel_counts`.
+        let mut per_value = [0usize; 256];
+        for img in self.layers.iter().flat_map(|m| m.values()) {
+            for &v in &img.data {
+                per_value[v as usize] += 1;
+            }
+        }
+        (0..=255u8)
+            .filter(|&v| v != SEED_NONE && per_value[v as usize] > 0)
+            .map(|v| (v, per_value[v as usize]))
+            .collect()
     }
 }
 
@@ -283,6 +294,22 @@ mod tests {
         // π r² within a pixel's rounding of the rim.
         assert!((n as f32 - std::f32::consts::PI * 25.0).abs() < 12.0, "{n}");
         assert_eq!(count(e.layer(0, 0).unwrap(), 1), n);
+        e.dab(
+            1,
+            2,
+            5.0,
+            5.0,
+            2.0,
+            Dab::Paint {
+                value: SEED_BACKGROUND,
+                overwrite: false,
+            },
+        );
+        assert_eq!(
+            e.counts(),
+            e.seeds().pixel_counts(),
+            "counted in place as over a copy"
+        );
         assert!(e.layer(1, 0).is_none(), "the other view is untouched");
     }
 

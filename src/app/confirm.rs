@@ -1,6 +1,6 @@
-//! Questions the app asks before it does something that cannot be undone: opening another scene
-//! or a session over unsaved strokes and results, replacing an earlier export, and (once, when
-//! a scene opens) whether to restore the autosave found for it. Each is a modal with the safe
+//! Questions the app asks before it does something that cannot be undone: closing the window,
+//! opening another scene or a session over unsaved strokes and results, replacing an earlier
+//! export, and (once, when a scene opens) whether to restore the autosave found for it. Each is a modal with the safe
 //! answer on Esc; nothing is lost without the user saying so.
 
 use super::EndofuseApp;
@@ -9,6 +9,8 @@ use std::path::PathBuf;
 /// What waits for the user's answer.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Confirm {
+    /// Close the window over unsaved work.
+    Close,
     /// Open this scene ("demo", a folder or a scene.json) over unsaved work.
     Open(String),
     /// Load this session over unsaved work.
@@ -38,9 +40,6 @@ impl EndofuseApp {
 
     /// Draws the pending question, if any, and acts on the answer.
     pub(super) fn confirm_modal(&mut self, ctx: &egui::Context) {
-        if self.confirm_close {
-            return;
-        }
         if let Some(question) = self.confirm.clone() {
             if ctx.input_mut(|i| i.consume_key(egui::Modifiers::NONE, egui::Key::Escape)) {
                 self.confirm = None;
@@ -54,6 +53,11 @@ impl EndofuseApp {
 
     fn ask(&mut self, ctx: &egui::Context, question: Confirm) {
         let (title, detail, go) = match &question {
+            Confirm::Close => (
+                "Save changes before closing?".to_string(),
+                "Your strokes or tracking results are not saved in a session file.".to_string(),
+                "Close without saving",
+            ),
             Confirm::Open(spec) => (
                 "Save your work before opening another scene?".to_string(),
                 format!(
@@ -117,10 +121,14 @@ impl EndofuseApp {
                 return;
             }
         }
-        if answer == Answer::Go && !matches!(question, Confirm::ReplaceExport(_)) {
+        if answer == Answer::Go && matches!(question, Confirm::Open(_) | Confirm::LoadSession(_)) {
             self.forget_current_autosave();
         }
         match question {
+            Confirm::Close => {
+                self.allow_close = true;
+                ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+            }
             Confirm::Open(spec) => self.open_scene(&spec),
             Confirm::LoadSession(path) => self.load_session_file(&path),
             Confirm::ReplaceExport(dir) => self.export_to(dir),

@@ -44,9 +44,9 @@ pub struct EndofuseApp {
     pub jobs: Jobs,
     pub screen: Screen,
     commands: CommandQueue,
-    confirm_close: bool,
     /// A question waiting for the user's answer (unsaved work, replacing an export).
     pub confirm: Option<confirm::Confirm>,
+    /// The user answered the close question: the next close goes through.
     allow_close: bool,
 }
 
@@ -85,7 +85,6 @@ impl EndofuseApp {
             jobs: Jobs::default(),
             screen: Screen::new(gpu_overlay),
             commands: CommandQueue::default(),
-            confirm_close: false,
             confirm: None,
             allow_close: false,
         };
@@ -109,7 +108,7 @@ impl EndofuseApp {
     /// (Space: pan) fires its action on release, unless the hold was used to drag.
     fn shortcuts(&mut self, ctx: &egui::Context) {
         // A text field or the close question has the keyboard.
-        if ctx.egui_wants_keyboard_input() || self.confirm_close || self.confirm.is_some() {
+        if ctx.egui_wants_keyboard_input() || self.confirm.is_some() {
             return;
         }
         let held: Vec<egui::Key> = Action::ALL.iter().filter_map(|a| a.held_key()).collect();
@@ -142,41 +141,13 @@ impl EndofuseApp {
         }
     }
 
+    /// A close with unsaved work is held back and asked about ([`confirm::Confirm::Close`]).
     fn close_guard(&mut self, ctx: &egui::Context) {
         if ctx.input(|i| i.viewport().close_requested()) && self.doc.unsaved() && !self.allow_close
         {
             ctx.send_viewport_cmd(egui::ViewportCommand::CancelClose);
-            self.confirm_close = true;
+            self.confirm = Some(confirm::Confirm::Close);
         }
-        if !self.confirm_close {
-            return;
-        }
-        if ctx.input_mut(|i| i.consume_key(egui::Modifiers::NONE, egui::Key::Escape)) {
-            self.confirm_close = false;
-            return;
-        }
-        egui::Modal::new(egui::Id::unique("confirm-close")).show(ctx, |ui| {
-            ui.heading("Save changes before closing?");
-            ui.label("Your strokes or tracking results are not saved in a session file.");
-            ui.horizontal(|ui| {
-                if ui.button("Save…").clicked() {
-                    if let Some(p) = self.files.dialogs.save_session() {
-                        self.save_session_to(&p);
-                        self.allow_close = true;
-                        ctx.send_viewport_cmd(egui::ViewportCommand::Close);
-                    }
-                    self.confirm_close = false;
-                }
-                if ui.button("Close without saving").clicked() {
-                    self.allow_close = true;
-                    self.confirm_close = false;
-                    ctx.send_viewport_cmd(egui::ViewportCommand::Close);
-                }
-                if ui.button("Cancel").clicked() {
-                    self.confirm_close = false;
-                }
-            });
-        });
     }
 }
 
@@ -210,8 +181,8 @@ impl eframe::App for EndofuseApp {
             }
         }
         self.apply_commands(&ctx);
-        self.confirm_modal(&ctx);
         self.close_guard(&ctx);
+        self.confirm_modal(&ctx);
     }
 
     fn save(&mut self, storage: &mut dyn eframe::Storage) {

@@ -274,14 +274,7 @@ fn check(field: Field, path: &Path, replace: bool) -> Check {
         }
         Field::Ct => {
             let v = crate::ctimport::volume::read(path).map_err(|e| e.to_string())?;
-            let mut labels: Vec<u16> = v
-                .labels
-                .iter()
-                .copied()
-                .collect::<std::collections::BTreeSet<_>>()
-                .into_iter()
-                .collect();
-            labels.retain(|&l| l != 0);
+            let labels = v.labels_present();
             let s = v.spacing_mm();
             if labels.is_empty() {
                 return Err("the volume is all background".into());
@@ -320,15 +313,18 @@ fn check(field: Field, path: &Path, replace: bool) -> Check {
             let non_empty = std::fs::read_dir(path).is_ok_and(|mut d| d.next().is_some());
             if non_empty && !replace {
                 Err("exists and is not empty: choose another folder or tick Replace".into())
+            } else if non_empty {
+                // What the worker will refuse even with Replace, said here already.
+                crate::ctimport::output::check_target(path, true, &[])
+                    .map(|()| "will be replaced".to_string())
+                    .map_err(|e| match e {
+                        crate::error::Error::Input(i) => i.problem,
+                        other => other.to_string(),
+                    })
             } else if path.is_file() {
                 Err("is a file".into())
             } else {
-                Ok(if non_empty {
-                    "will be replaced"
-                } else {
-                    "will be created"
-                }
-                .into())
+                Ok("will be created".into())
             }
         }
     }
