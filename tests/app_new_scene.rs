@@ -7,7 +7,7 @@
 use egui_kittest::Harness;
 use egui_kittest::kittest::Queryable;
 use endofuse::app::panels::new_scene::Field;
-use endofuse::app::{Dialogs, EndofuseApp};
+use endofuse::app::{Dialogs, EndofuseApp, Picked, Picker};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -38,20 +38,10 @@ struct Scripted {
 }
 
 impl Dialogs for Scripted {
-    fn pick_scene(&mut self) -> Option<PathBuf> {
-        None
-    }
-    fn pick_session(&mut self) -> Option<PathBuf> {
-        None
-    }
-    fn save_session(&mut self) -> Option<PathBuf> {
-        None
-    }
-    fn pick_folder(&mut self, title: &str) -> Option<PathBuf> {
-        (title == Field::Out.label()).then(|| self.out.clone())
-    }
-    fn pick_file(&mut self, title: &str, _: &[&str]) -> Option<PathBuf> {
-        [
+    fn pick(&mut self, picker: &Picker) -> Picked {
+        let title = picker.title();
+        let path = [
+            (Field::Out, &self.out),
             (Field::Calibration, &self.calib),
             (Field::Ct, &self.ct),
             (Field::Left, &self.left),
@@ -59,7 +49,8 @@ impl Dialogs for Scripted {
         ]
         .into_iter()
         .find(|(f, _)| f.label() == title)
-        .map(|(_, p)| p.clone())
+        .map(|(_, p)| p.clone());
+        path.map_or(Picked::Cancelled, Picked::Chosen)
     }
 }
 

@@ -8,7 +8,8 @@ use egui_kittest::kittest::Queryable;
 use endofuse::app::actions::Action;
 use endofuse::app::commands::AppCommand;
 use endofuse::app::confirm::Confirm;
-use endofuse::app::{EndofuseApp, NoDialogs};
+use endofuse::app::pickers::FileRequest;
+use endofuse::app::{EndofuseApp, NoDialogs, UnavailableDialogs};
 use std::path::Path;
 
 mod common;
@@ -93,4 +94,104 @@ fn unsaved_work_is_asked_about_and_help_lists_every_action() {
         assert!(count(&h, *a) > b, "the help sheet lists {a:?}");
     }
     h.snapshot("app_help_sheet");
+}
+
+/// Where no system file dialog can open (no xdg-desktop-portal), every file action still works:
+/// the app says so once and picks in its built-in browser instead.
+#[test]
+fn file_actions_fall_back_to_the_built_in_browser() {
+    // A fixed path: the snapshot shows it.
+    let dir = std::env::temp_dir().join("endofuse-app-browser");
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut h = Harness::builder()
+        .with_size([1180.0, 700.0])
+        .with_accessibility_check(false)
+        .wgpu()
+        .build_eframe(|cc| {
+            let mut app = EndofuseApp::new(cc, "demo", Box::new(UnavailableDialogs));
+            app.files.autosave_dir = Some(dir.join("autosaves"));
+            app.files.last_folder = Some(dir.clone());
+            app
+        });
+    step_until(&mut h, "the demo to load", |a| a.doc.scene.is_some());
+    let mut settings = h.state().doc.settings.clone();
+    settings.trees = 29;
+    h.state().send(AppCommand::SetSettings(settings));
+    h.run_steps(2);
+
+    // Save session: the system dialog fails, the browser opens in its place and says why.
+    h.state().send(AppCommand::Action(Action::SaveSession));
+    h.run_steps(3);
+    assert!(
+        h.state().screen.browser.is_some(),
+        "the built-in browser opens"
+    );
+    let notice = h.state().status.notice.clone().unwrap_or_default();
+    assert!(notice.contains("not available"), "{notice}");
+    h.snapshot("app_file_browser");
+    h.get_by_label("Save").click();
+    h.run_steps(3);
+    let saved = dir.join("session.endofuse.json");
+    assert!(
+        saved.is_file(),
+        "the session is written where the browser said"
+    );
+    assert!(h.state().screen.browser.is_none());
+    assert!(!h.state().doc.unsaved());
+
+    // Load session: straight to the browser (the system dialog is not tried again).
+    let mut settings = h.state().doc.settings.clone();
+    settings.trees = 7;
+    h.state().send(AppCommand::SetSettings(settings));
+    h.run_steps(2);
+    h.state().send(AppCommand::Action(Action::LoadSession));
+    h.run_steps(3);
+    h.get_by_label("🗋 session.endofuse.json").click();
+    h.run_steps(2);
+    h.get_by_label("Open").click();
+    h.run_steps(3);
+    // Unsaved work: asked first, as with the system dialog.
+    assert_eq!(h.state().confirm, Some(Confirm::LoadSession(saved.clone())));
+    h.get_by_label_contains("without saving").click();
+    step_until(&mut h, "the session to load", |a| {
+        a.doc.settings.trees == 29
+    });
+
+    // Saving the session over a file that is not one is refused, and nothing is written.
+    let scene_like = dir.join("scene.json");
+    std::fs::write(&scene_like, "{\"cameras\": []}").unwrap();
+    let ctx = h.ctx.clone();
+    h.state_mut().path_chosen(
+        FileRequest::SaveSession { then: None },
+        scene_like.clone(),
+        &ctx,
+    );
+    h.run_steps(2);
+    assert_eq!(
+        std::fs::read_to_string(&scene_like).unwrap(),
+        "{\"cameras\": []}"
+    );
+    let error = h.state().status.error.clone().unwrap_or_default();
+    assert!(error.contains("not an endofuse session"), "{error}");
+
+    // Save seeds of the demo: a folder picked in the browser.
+    h.state().send(AppCommand::Action(Action::SaveSeeds));
+    h.run_steps(3);
+    assert!(h.state().screen.browser.is_some());
+    h.get_by_label("Open").click();
+    h.run_steps(3);
+    let notice = h.state().status.notice.clone().unwrap_or_default();
+    assert!(notice.contains("seed PNGs"), "{notice}");
+    let pngs = std::fs::read_dir(&dir)
+        .unwrap()
+        .flatten()
+        .filter(|e| e.path().is_dir())
+        .flat_map(|d| std::fs::read_dir(d.path()).unwrap().flatten())
+        .filter(|f| f.path().extension().is_some_and(|x| x == "png"))
+        .count();
+    assert!(
+        pngs > 0,
+        "the seed PNGs are written under the folder picked"
+    );
 }

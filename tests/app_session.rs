@@ -6,7 +6,7 @@ use egui::{Event, Modifiers, PointerButton, Pos2, vec2};
 use egui_kittest::Harness;
 use egui_kittest::kittest::Queryable;
 use endofuse::app::actions::Action;
-use endofuse::app::{Dialogs, EndofuseApp, Tool};
+use endofuse::app::{Dialogs, EndofuseApp, Picked, Picker, Tool};
 use std::path::{Path, PathBuf};
 
 mod common;
@@ -17,17 +17,11 @@ use common::app::step_until;
 struct Scripted(PathBuf);
 
 impl Dialogs for Scripted {
-    fn pick_scene(&mut self) -> Option<PathBuf> {
-        None
-    }
-    fn pick_session(&mut self) -> Option<PathBuf> {
-        Some(self.0.clone())
-    }
-    fn save_session(&mut self) -> Option<PathBuf> {
-        Some(self.0.clone())
-    }
-    fn pick_folder(&mut self, _: &str) -> Option<PathBuf> {
-        Some(self.0.with_extension("export"))
+    fn pick(&mut self, picker: &Picker) -> Picked {
+        Picked::Chosen(match picker {
+            Picker::Folder { .. } => self.0.with_extension("export"),
+            _ => self.0.clone(),
+        })
     }
 }
 

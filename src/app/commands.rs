@@ -5,6 +5,7 @@
 
 use super::EndofuseApp;
 use super::actions::Action;
+use super::pickers::FileRequest;
 use super::state::{Layer, Prefs, StructureStyle, Tool};
 use super::view::ViewTransform;
 use crate::geometry::Affine;
@@ -154,16 +155,7 @@ impl EndofuseApp {
             AppCommand::DiscardAutosave => self.discard_autosave(),
             AppCommand::DismissError => self.status.error = None,
             AppCommand::BrowseNewScene(field) => {
-                let picked = if field.is_folder() {
-                    self.files.dialogs.pick_folder(field.label())
-                } else {
-                    self.files
-                        .dialogs
-                        .pick_file(field.label(), field.extensions())
-                };
-                if let (Some(p), Some(form)) = (picked, self.screen.new_scene.as_mut()) {
-                    form.set(field, &p);
-                }
+                self.request_path(FileRequest::NewSceneField(field), ctx)
             }
             AppCommand::CreateScene(options) => self.create_scene(*options),
         }
@@ -173,27 +165,15 @@ impl EndofuseApp {
     pub fn do_action(&mut self, a: Action, ctx: &egui::Context) {
         let frames = self.doc.frame_count();
         match a {
-            Action::OpenScene => {
-                if let Some(p) = self.files.dialogs.pick_scene() {
-                    self.open_scene_asking(&p.display().to_string());
-                }
-            }
+            Action::OpenScene => self.request_path(FileRequest::OpenScene, ctx),
             Action::NewScene => {
                 self.screen.new_scene.get_or_insert_with(Default::default);
             }
             Action::OpenDemo => self.open_scene_asking(crate::open::DEMO),
-            Action::SaveSession => {
-                if let Some(p) = self.files.dialogs.save_session() {
-                    self.save_session_to(&p);
-                }
-            }
-            Action::LoadSession => {
-                if let Some(p) = self.files.dialogs.pick_session() {
-                    self.load_session_asking(p);
-                }
-            }
-            Action::SaveSeeds => self.save_seed_pngs(),
-            Action::Export => self.export(),
+            Action::SaveSession => self.request_path(FileRequest::SaveSession { then: None }, ctx),
+            Action::LoadSession => self.request_path(FileRequest::LoadSession, ctx),
+            Action::SaveSeeds => self.save_seed_pngs(ctx),
+            Action::Export => self.export(ctx),
             Action::Brush => self.view.tool = Tool::Brush,
             Action::Eraser => self.view.tool = Tool::Eraser,
             Action::Place => self.view.tool = Tool::Place,

@@ -112,16 +112,17 @@ impl EndofuseApp {
             return;
         }
         if answer == Answer::SaveFirst {
-            let Some(p) = self.files.dialogs.save_session() else {
-                return;
-            };
-            self.save_session_to(&p);
-            if self.doc.unsaved() {
-                // The save failed (the status bar says why): keep the work.
-                return;
-            }
+            // Saved first, then on with the question (unless the save fails).
+            let then = Some(question);
+            self.request_path(super::pickers::FileRequest::SaveSession { then }, ctx);
+            return;
         }
-        if answer == Answer::Go && matches!(question, Confirm::Open(_) | Confirm::LoadSession(_)) {
+        self.proceed(question, ctx);
+    }
+
+    /// Does what the user agreed to (after saving, when they chose to save first).
+    pub(super) fn proceed(&mut self, question: Confirm, ctx: &egui::Context) {
+        if matches!(question, Confirm::Open(_) | Confirm::LoadSession(_)) {
             self.forget_current_autosave();
         }
         match question {

@@ -6,6 +6,7 @@
 use super::EndofuseApp;
 use super::commands::AppCommand;
 use super::jobs::{PendingSession, camera_sizes};
+use super::pickers::{Dialogs, FileRequest};
 use crate::error::Error;
 use crate::session::{self, SESSION_FORMAT, Session};
 use crate::strokes::SeedEditor;
@@ -13,73 +14,13 @@ use crossbeam_channel::{Receiver, Sender, unbounded};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-/// File dialogs behind a trait, so tests never open one (rfd runs on the UI thread).
-pub trait Dialogs {
-    fn pick_scene(&mut self) -> Option<PathBuf>;
-    fn pick_session(&mut self) -> Option<PathBuf>;
-    fn save_session(&mut self) -> Option<PathBuf>;
-    fn pick_folder(&mut self, title: &str) -> Option<PathBuf>;
-    /// A file to read, titled `title`, offering files ending in `extensions` (and any file).
-    fn pick_file(&mut self, _title: &str, _extensions: &[&str]) -> Option<PathBuf> {
-        None
-    }
-}
-
-/// The native dialogs.
-pub struct RfdDialogs;
-
-impl Dialogs for RfdDialogs {
-    fn pick_scene(&mut self) -> Option<PathBuf> {
-        rfd::FileDialog::new()
-            .set_title("Open a scene (scene.json)")
-            .add_filter("scene", &["json"])
-            .pick_file()
-    }
-    fn pick_session(&mut self) -> Option<PathBuf> {
-        rfd::FileDialog::new()
-            .set_title("Load a session")
-            .add_filter("endofuse session", &["json"])
-            .pick_file()
-    }
-    fn save_session(&mut self) -> Option<PathBuf> {
-        rfd::FileDialog::new()
-            .set_title("Save the session")
-            .set_file_name("session.endofuse.json")
-            .save_file()
-    }
-    fn pick_folder(&mut self, title: &str) -> Option<PathBuf> {
-        rfd::FileDialog::new().set_title(title).pick_folder()
-    }
-    fn pick_file(&mut self, title: &str, extensions: &[&str]) -> Option<PathBuf> {
-        rfd::FileDialog::new()
-            .set_title(title)
-            .add_filter("expected files", extensions)
-            .add_filter("any file", &["*"])
-            .pick_file()
-    }
-}
-
-/// No dialogs (tests): every request is cancelled.
-pub struct NoDialogs;
-
-impl Dialogs for NoDialogs {
-    fn pick_scene(&mut self) -> Option<PathBuf> {
-        None
-    }
-    fn pick_session(&mut self) -> Option<PathBuf> {
-        None
-    }
-    fn save_session(&mut self) -> Option<PathBuf> {
-        None
-    }
-    fn pick_folder(&mut self, _: &str) -> Option<PathBuf> {
-        None
-    }
-}
-
 /// Where the app's files go, and the autosave's bookkeeping.
 pub struct Files {
     pub dialogs: Box<dyn Dialogs>,
+    /// The system dialog failed once: every later request goes to the built-in browser.
+    pub system_dialogs_failed: bool,
+    /// The folder of the last path chosen, where the built-in browser starts.
+    pub last_folder: Option<PathBuf>,
     /// Folder of autosaves (None: the app's data folder).
     pub autosave_dir: Option<PathBuf>,
     /// An autosave found for the scene just opened, offered to the user.
@@ -105,6 +46,8 @@ impl Files {
         let (autosaved_tx, autosaved_rx) = unbounded();
         Self {
             dialogs,
+            system_dialogs_failed: false,
+            last_folder: None,
             autosave_dir: None,
             autosave_offer: None,
             last_autosave_s: 0.0,
@@ -128,6 +71,11 @@ impl Files {
     pub fn autosave_path(&self, spec: &str) -> PathBuf {
         session::autosave_path(&self.autosave_folder(), spec)
     }
+}
+
+/// True when `path` is a session file (its text names the session format).
+fn is_session_file(path: &Path) -> bool {
+    std::fs::read_to_string(path).is_ok_and(|t| t.contains(SESSION_FORMAT))
 }
 
 /// Removes a file that may not exist; an error names it when it exists and cannot be removed.
@@ -233,6 +181,15 @@ impl EndofuseApp {
     }
 
     pub(super) fn save_session_to(&mut self, path: &Path) {
+        // A session replaces an earlier session, never another file picked by mistake (a
+        // scene.json, a mesh).
+        if path.is_file() && !is_session_file(path) {
+            self.status.fail(format!(
+                "{} is not an endofuse session: not replaced; choose another name",
+                path.display()
+            ));
+            return;
+        }
         match self.doc.session().save(path) {
             Ok(()) => {
                 self.doc.saved = self.doc.revision();
@@ -296,20 +253,31 @@ impl EndofuseApp {
     /// Writes the painted seeds as the contract's label PNGs: into the scene's seeds folder
     /// (its `seeds` template, or `seeds/{camera}/{frame:06}.png` added to scene.json), or for
     /// the demo into a folder the user picks.
-    pub(super) fn save_seed_pngs(&mut self) {
+    pub(super) fn save_seed_pngs(&mut self, ctx: &egui::Context) {
         let Some(scene) = self.doc.scene.clone() else {
             return;
         };
-        let seeds = self.doc.editor.seeds();
-        let result = match &scene.root {
-            Some(root) => crate::export::write_seeds_into_scene(&scene, root, &seeds),
-            None => match self.files.dialogs.pick_folder("Folder for the seed PNGs") {
-                Some(dir) => {
-                    crate::export::write_seeds_into_folder(&scene, &dir, &seeds).map(|n| (n, dir))
-                }
-                None => return,
-            },
+        match &scene.root {
+            Some(root) => {
+                let result =
+                    crate::export::write_seeds_into_scene(&scene, root, &self.doc.editor.seeds());
+                self.seeds_written(result);
+            }
+            None => self.request_path(FileRequest::SeedFolder, ctx),
+        }
+    }
+
+    /// Writes the painted seeds as label PNGs under `dir` (the demo's, picked by the user).
+    pub(super) fn save_seed_pngs_into(&mut self, dir: &Path) {
+        let Some(scene) = self.doc.scene.clone() else {
+            return;
         };
+        let result = crate::export::write_seeds_into_folder(&scene, dir, &self.doc.editor.seeds())
+            .map(|n| (n, dir.to_path_buf()));
+        self.seeds_written(result);
+    }
+
+    fn seeds_written(&mut self, result: Result<(usize, PathBuf), Error>) {
         match result {
             Ok((n, dir)) => {
                 self.status.notice = Some(format!("Wrote {n} seed PNGs under {}", dir.display()))
@@ -341,10 +309,7 @@ impl EndofuseApp {
             }
         }
         if let Some(p) = dropped.first() {
-            let is_session = p.is_file()
-                && std::fs::read_to_string(p)
-                    .ok()
-                    .is_some_and(|t| t.contains(SESSION_FORMAT));
+            let is_session = p.is_file() && is_session_file(p);
             self.send(if is_session {
                 AppCommand::LoadSession(p.clone())
             } else {

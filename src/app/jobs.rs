@@ -242,7 +242,7 @@ impl EndofuseApp {
 
     /// Exports masks, overlay PNGs, trajectory.json and metrics.json of the tracked frames
     /// through the same writer as `endofuse track` (on the worker).
-    pub(super) fn export(&mut self) {
+    pub(super) fn export(&mut self, ctx: &egui::Context) {
         if self.doc.scene.is_none() || self.doc.model.is_none() {
             return;
         }
@@ -250,9 +250,12 @@ impl EndofuseApp {
             self.status.fail("Nothing tracked yet to export.");
             return;
         }
-        let Some(dir) = self.files.dialogs.pick_folder("Export tracking results to") else {
-            return;
-        };
+        self.request_path(super::pickers::FileRequest::Export, ctx);
+    }
+
+    /// Exports into `dir` when it is empty or new; asks first when it holds an earlier export;
+    /// refuses any other folder.
+    pub(super) fn export_into(&mut self, dir: std::path::PathBuf) {
         match crate::export::check_export_folder(&dir) {
             Ok(crate::export::ExportFolder::Fresh) => self.export_to(dir),
             Ok(crate::export::ExportFolder::EarlierExport) => {

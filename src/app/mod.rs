@@ -19,11 +19,12 @@ pub mod frames;
 pub mod jobs;
 pub mod overlay3d;
 pub mod panels;
+pub mod pickers;
 pub mod state;
 pub mod view;
 pub mod views;
 
-pub use files::{Dialogs, NoDialogs, RfdDialogs};
+pub use pickers::{Dialogs, NoDialogs, Picked, Picker, RfdDialogs, UnavailableDialogs};
 pub use state::{Busy, Document, Layer, Prefs, Status, StructureStyle, Tool, ViewState};
 
 use crate::worker::Worker;
@@ -108,7 +109,10 @@ impl EndofuseApp {
     /// (Space: pan) fires its action on release, unless the hold was used to drag.
     fn shortcuts(&mut self, ctx: &egui::Context) {
         // A text field or the close question has the keyboard.
-        if ctx.egui_wants_keyboard_input() || self.confirm.is_some() {
+        if ctx.egui_wants_keyboard_input()
+            || self.confirm.is_some()
+            || self.screen.browser.is_some()
+        {
             return;
         }
         let held: Vec<egui::Key> = Action::ALL.iter().filter_map(|a| a.held_key()).collect();
@@ -180,6 +184,7 @@ impl eframe::App for EndofuseApp {
                 panels::help::help_window(&shown, &ctx);
             }
         }
+        self.browser_window(&ctx);
         self.apply_commands(&ctx);
         self.close_guard(&ctx);
         self.confirm_modal(&ctx);

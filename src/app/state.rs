@@ -33,6 +33,8 @@ pub struct Prefs {
     pub show_overlay: bool,
     /// The fit mode last chosen (R, L, LS, LSC), kept between runs.
     pub mode: String,
+    /// Always pick files in the built-in browser, never the system's dialog.
+    pub builtin_file_browser: bool,
 }
 
 impl Default for Prefs {
@@ -47,6 +49,7 @@ impl Default for Prefs {
             show_seeds: true,
             show_overlay: true,
             mode: "LSC".into(),
+            builtin_file_browser: false,
         }
     }
 }

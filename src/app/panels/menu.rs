@@ -30,6 +30,20 @@ pub fn menu_bar(shown: &Shown, ui: &mut egui::Ui) {
                 menu_item(shown, ui, Action::SaveSession);
                 menu_item(shown, ui, Action::SaveSeeds);
                 menu_item(shown, ui, Action::Export);
+                ui.separator();
+                let mut builtin = shown.prefs.builtin_file_browser;
+                if ui
+                    .checkbox(&mut builtin, "Use the built-in file browser")
+                    .on_hover_text(
+                        "Pick files inside the app instead of the system's dialog (chosen by \
+                         itself when the system dialog cannot open)",
+                    )
+                    .changed()
+                {
+                    let mut prefs = shown.prefs.clone();
+                    prefs.builtin_file_browser = builtin;
+                    shown.commands.send(AppCommand::SetPrefs(prefs));
+                }
             });
             ui.menu_button("Edit", |ui| {
                 menu_item(shown, ui, Action::Undo);

@@ -45,6 +45,8 @@ pub struct Screen {
     pub gpu_overlay: bool,
     /// File → New scene's form, while it is open.
     pub new_scene: Option<crate::app::panels::new_scene::NewSceneForm>,
+    /// The built-in file browser, while it is open.
+    pub browser: Option<crate::app::pickers::Browser>,
 }
 
 impl Screen {
@@ -56,6 +58,7 @@ impl Screen {
             loader: FrameLoader::spawn(),
             gpu_overlay,
             new_scene: None,
+            browser: None,
         }
     }
 }
