@@ -4,7 +4,7 @@
 //! checked on the app's state and compared with a snapshot in tests/snapshots; with
 //! UPDATE_SCREENSHOTS=1 the same images are written to screenshots/ for the README.
 
-use egui::{Event, Key, Modifiers, PointerButton, Pos2, pos2};
+use egui::{Event, Key, Modifiers, PointerButton, Pos2, pos2, vec2};
 use egui_kittest::Harness;
 use endofuse::app::actions::Action;
 use endofuse::app::{EndofuseApp, Layer, NoDialogs, Tool};
@@ -125,6 +125,19 @@ fn paint_train_track_scrub_and_review_the_demo() {
         a.has_probabilities(a.view.frame)
     });
     h.state_mut().status.notice = None;
+    // Hide the seeds in the left view only (its "seeds" toggle under the title), to see the
+    // map under them; the right view keeps them. Both show the map's colour scale.
+    let left = h.state().screen.layout.views[0];
+    let toggle = left.left_top() + vec2(6.0 + 26.0, 22.0 + 9.0);
+    let painted = h.state().doc.editor.counts();
+    move_to(&mut h, toggle);
+    press(&mut h, toggle, true);
+    press(&mut h, toggle, false);
+    h.run_steps(2);
+    assert!(h.state().view.hidden_in(0).seeds, "seeds hidden in the left view");
+    assert!(!h.state().view.hidden_in(1).seeds, "and still shown in the right view");
+    assert_eq!(h.state().doc.editor.counts(), painted, "the click painted nothing");
+    move_to(&mut h, pos2(5.0, SIZE[1] - 5.0));
     shoot(&mut h, "app_probability_view");
 
     // Track frames 0–5 in the worker; results stream in and the view follows.

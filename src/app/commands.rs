@@ -6,7 +6,7 @@
 use super::EndofuseApp;
 use super::actions::Action;
 use super::pickers::FileRequest;
-use super::state::{Layer, Prefs, StructureStyle, Tool};
+use super::state::{Layer, Prefs, StructureStyle, Tool, ViewPart};
 use super::view::ViewTransform;
 use crate::geometry::Affine;
 use crate::session::FitSettings;
@@ -32,6 +32,8 @@ pub enum AppCommand {
     SetReviewShown(bool),
     SetHelpShown(bool),
     SetTransform(ViewTransform),
+    /// Hide (or show again) seeds or the overlay in one view only.
+    ToggleInView { camera: usize, part: ViewPart },
     /// Brush or eraser size times `factor`.
     ResizeBrush(f32),
     BeginStroke,
@@ -121,6 +123,16 @@ impl EndofuseApp {
             AppCommand::SetHelpShown(shown) => self.view.show_help = shown,
             AppCommand::SetReviewShown(shown) => self.view.show_review = shown,
             AppCommand::SetTransform(t) => self.view.transform = Some(t),
+            AppCommand::ToggleInView { camera, part } => {
+                if self.view.hidden.len() <= camera {
+                    self.view.hidden.resize(camera + 1, Default::default());
+                }
+                let hidden = &mut self.view.hidden[camera];
+                match part {
+                    ViewPart::Seeds => hidden.seeds = !hidden.seeds,
+                    ViewPart::Overlay => hidden.overlay = !hidden.overlay,
+                }
+            }
             AppCommand::ResizeBrush(factor) => self.resize_brush(factor),
             AppCommand::BeginStroke => self.doc.editor.begin_stroke(),
             AppCommand::PaintLine {

@@ -216,6 +216,30 @@ pub struct ViewState {
     pub show_review: bool,
     /// The help sheet is open.
     pub show_help: bool,
+    /// Per camera: seeds and overlay hidden in that view only (to see the probability under
+    /// them). Missing entries are shown.
+    pub hidden: Vec<ViewHidden>,
+}
+
+/// What one view hides of what the side panel shows.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct ViewHidden {
+    pub seeds: bool,
+    pub overlay: bool,
+}
+
+/// A part of a view that can be hidden in it alone.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ViewPart {
+    Seeds,
+    Overlay,
+}
+
+impl ViewState {
+    /// What view `camera` hides.
+    pub fn hidden_in(&self, camera: usize) -> ViewHidden {
+        self.hidden.get(camera).copied().unwrap_or_default()
+    }
 }
 
 impl Default for ViewState {
@@ -234,6 +258,7 @@ impl Default for ViewState {
             styles: Vec::new(),
             show_review: false,
             show_help: false,
+            hidden: Vec::new(),
         }
     }
 }

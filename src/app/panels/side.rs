@@ -133,10 +133,15 @@ fn side_contents(shown: &Shown, ui: &mut egui::Ui) {
         "live update (retrain after strokes)",
     );
     if let Some(a) = &doc.appearance {
+        // The out-of-bag error only says how separable the strokes are, not how good the
+        // maps are away from them: on hover, with that said.
         ui.label(format!(
-            "trained on {} px in {:.2} s\nout-of-bag error {:.2} %",
-            a.stats.samples,
-            a.stats.train_s,
+            "trained on {} px in {:.2} s",
+            a.stats.samples, a.stats.train_s
+        ))
+        .on_hover_text(format!(
+            "Out-of-bag error {:.2} %: how well the forest separates the painted pixels, \
+             not how good the maps are elsewhere. Check the probability and uncertainty views.",
             a.stats.oob_error * 100.0
         ));
     } else {
@@ -160,20 +165,30 @@ fn side_contents(shown: &Shown, ui: &mut egui::Ui) {
             }
         }
     });
-    if let (Layer::Probability(k), Some(classes)) = (view.layer, &doc.classes) {
-        let mut layer = view.layer;
-        egui::ComboBox::from_label("class")
-            .selected_text(classes.names.get(k).cloned().unwrap_or_default())
-            .show_ui(ui, |ui| {
-                for (i, name) in classes.names.iter().enumerate() {
-                    ui.selectable_value(&mut layer, Layer::Probability(i), name);
-                }
-            });
-        if layer != view.layer {
-            send(AppCommand::SetLayer(layer));
+    ui.horizontal(|ui| {
+        if let (Layer::Probability(k), Some(classes)) = (view.layer, &doc.classes) {
+            let mut layer = view.layer;
+            egui::ComboBox::from_id_salt("probability class")
+                .width(86.0)
+                .selected_text(classes.names.get(k).cloned().unwrap_or_default())
+                .show_ui(ui, |ui| {
+                    for (i, name) in classes.names.iter().enumerate() {
+                        ui.selectable_value(&mut layer, Layer::Probability(i), name);
+                    }
+                })
+                .response
+                .on_hover_text("The class whose probability is shown");
+            if layer != view.layer {
+                send(AppCommand::SetLayer(layer));
+            }
         }
-    }
-    ui.add(egui::Slider::new(&mut prefs.probability_opacity, 0.0..=1.0).text("map opacity"));
+        let label = if matches!(view.layer, Layer::Probability(_)) {
+            "opacity"
+        } else {
+            "map opacity"
+        };
+        ui.add(egui::Slider::new(&mut prefs.probability_opacity, 0.0..=1.0).text(label));
+    });
 
     ui.separator();
     ui.heading("Fit");
@@ -188,24 +203,26 @@ fn side_contents(shown: &Shown, ui: &mut egui::Ui) {
             ] {
                 ui.selectable_value(&mut settings.mode, m.to_string(), format!("{m}: {what}"));
             }
-        });
-    ui.label(
-        RichText::new(
-            "LSC corrects the cameras only where a zoom change is marked or detected; elsewhere it fits as LS.",
-        )
-        .weak()
-        .small(),
-    );
+        })
+        .response
+        .on_hover_text(
+            "LSC corrects the cameras only where a zoom change is marked or detected; \
+             elsewhere it fits as LS.",
+        );
     let trained = doc.appearance.is_some();
     ui.horizontal_wrapped(|ui| {
         action_button(shown, ui, Action::Initialise, idle && trained);
         action_button(shown, ui, Action::FitFrame, idle && trained);
     });
-    ui.label(
-        RichText::new("Place model: drag to move, right- or Ctrl-drag to rotate, wheel for depth.")
+    if view.tool == Tool::Place {
+        ui.label(
+            RichText::new(
+                "Place model: drag to move, right- or Ctrl-drag to rotate, wheel for depth.",
+            )
             .weak()
             .small(),
-    );
+        );
+    }
     ui.horizontal_wrapped(|ui| {
         action_button(shown, ui, Action::Track, idle && trained);
         action_button(shown, ui, Action::Review, true);

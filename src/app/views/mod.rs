@@ -4,13 +4,14 @@
 
 pub mod overlay;
 pub mod place;
-pub mod textures;
+pub mod scale;
+mod textures;
 
 use super::Shown;
 use super::actions::Action;
 use super::commands::AppCommand;
 use super::frames::FrameLoader;
-use super::state::Tool;
+use super::state::{Tool, ViewPart};
 use super::view::{ViewTransform, grid};
 use crate::strokes::Dab;
 use egui::{Color32, Pos2, Rect, Sense, Stroke, Vec2, pos2, vec2};
@@ -121,7 +122,8 @@ pub fn views(shown: &Shown, screen: &mut Screen, ui: &mut egui::Ui) {
             let a = (prefs.probability_opacity * 255.0) as u8;
             painter.image(tex.id(), image_rect, uv, Color32::from_white_alpha(a));
         }
-        if prefs.show_overlay {
+        let hidden = view.hidden_in(c);
+        if prefs.show_overlay && !hidden.overlay {
             if screen.gpu_overlay {
                 if let Some(shape) = overlay::overlay_callback(shown, &ctx, c, rect, image_rect) {
                     painter.add(shape);
@@ -131,6 +133,7 @@ pub fn views(shown: &Shown, screen: &mut Screen, ui: &mut egui::Ui) {
             }
         }
         if prefs.show_seeds
+            && !hidden.seeds
             && let Some(tex) = textures::seeds_texture(shown, screen, &ctx, c)
         {
             let a = (prefs.seed_opacity * 255.0) as u8;
@@ -143,6 +146,7 @@ pub fn views(shown: &Shown, screen: &mut Screen, ui: &mut egui::Ui) {
             egui::FontId::proportional(13.0),
             Color32::from_gray(230),
         );
+        scale::draw(shown, &painter, rect);
         let fitted = shown.doc.results.get(&view.frame);
         if fitted.is_none() && shown.doc.placement.is_some() {
             // The model drawn here is where it was placed, not a fit of this frame.
@@ -172,6 +176,7 @@ pub fn views(shown: &Shown, screen: &mut Screen, ui: &mut egui::Ui) {
             transform,
         };
         interact(shown, screen, &ctx, &response, &view_rect, pan_key);
+        view_toggles(shown, ui, c, rect);
         // Brush cursor: a black-and-white double ring, unlike any painted seed.
         if let Some(p) = response.hover_pos()
             && matches!(view.tool, Tool::Brush | Tool::Eraser)
@@ -194,6 +199,34 @@ pub fn views(shown: &Shown, screen: &mut Screen, ui: &mut egui::Ui) {
             }
             ctx.set_cursor_icon(egui::CursorIcon::None);
         }
+    }
+}
+
+/// Under the view's title: hide this view's seeds or overlay, to see the map under them.
+fn view_toggles(shown: &Shown, ui: &mut egui::Ui, camera: usize, rect: Rect) {
+    let hidden = shown.view.hidden_in(camera);
+    let parts = [
+        (ViewPart::Seeds, "seeds", hidden.seeds, shown.prefs.show_seeds),
+        (ViewPart::Overlay, "overlay", hidden.overlay, shown.prefs.show_overlay),
+    ];
+    let mut at = rect.left_top() + vec2(6.0, 22.0);
+    for (part, label, is_hidden, globally_shown) in parts {
+        let text = egui::RichText::new(label).size(11.0);
+        let button = egui::Button::selectable(globally_shown && !is_hidden, text);
+        let size = vec2(52.0, 18.0);
+        let r = ui
+            .put(Rect::from_min_size(at, size), button)
+            .on_hover_text(if globally_shown {
+                "Show or hide in this view only"
+            } else {
+                "Hidden in every view (side panel)"
+            });
+        if r.clicked() && globally_shown {
+            shown
+                .commands
+                .send(AppCommand::ToggleInView { camera, part });
+        }
+        at.x += size.x + 4.0;
     }
 }
 

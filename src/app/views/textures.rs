@@ -130,22 +130,14 @@ pub(super) fn probability_texture(
             m.class_plane(k.min(m.classes - 1))
                 .data
                 .iter()
-                .flat_map(|&p| [col[0], col[1], col[2], (p.clamp(0.0, 1.0) * 255.0) as u8])
+                .flat_map(|&p| super::scale::probability_rgba(col, p))
                 .collect()
         }
         _ => m
             .uncertainty()
             .data
             .iter()
-            .flat_map(|&u| {
-                let u = u.clamp(0.0, 1.0);
-                [
-                    255,
-                    (80.0 + 175.0 * u) as u8,
-                    (40.0 * (1.0 - u)) as u8,
-                    (u * 255.0) as u8,
-                ]
-            })
+            .flat_map(|&u| super::scale::uncertainty_rgba(u))
             .collect(),
     };
     let tex = rgba_texture(
