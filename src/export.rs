@@ -100,6 +100,7 @@ pub fn export_results(
             ms: r.ms,
             confidence: r.confidence,
             lost: r.lost,
+            depth_explains_zoom: r.depth_explains_zoom,
             labels: rendered.labels,
             hidden: rendered.hidden,
             centroids: rendered.centroids,

@@ -274,6 +274,14 @@ fn run(cli: Cli) -> Result<()> {
                 m.timing.ms_per_frame.median,
                 m.timing.forest_train_s
             );
+            if m.depth_explains_zoom_frames > 0 {
+                eprintln!(
+                    "track: warning: in {} frames the apparent size changed as in a zoom with the \
+                     cameras fixed (mode {}): depth explained it, so hidden structures may be off \
+                     there (confidence lowered; LSC corrects the cameras)",
+                    m.depth_explains_zoom_frames, m.mode
+                );
+            }
             if let Some(d) = &m.dice {
                 let by: Vec<String> = d
                     .by_structure

@@ -56,6 +56,10 @@ pub struct FrameResult {
     /// scene has a ground-truth trajectory: what a good Dice cannot show.
     #[serde(default)]
     pub hidden_error_mm: Vec<(String, f64)>,
+    /// The apparent size changed as in a zoom with the cameras fixed (see
+    /// [`crate::fit::tracker::TrackedFrame::depth_explains_zoom`]).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub depth_explains_zoom: bool,
 }
 
 /// One painted view and frame, run-length coded: (run length, seed value).

@@ -56,6 +56,9 @@ pub struct TrackMetrics {
     pub mode: String,
     pub frames: usize,
     pub lost_frames: usize,
+    /// Frames whose apparent size changed as in a zoom with the cameras fixed (trajectory.json
+    /// warns "depth_explains_zoom" on each): the hidden structures may be off there.
+    pub depth_explains_zoom_frames: usize,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub dice: Option<DiceSummary>,
     #[serde(skip_serializing_if = "BTreeMap::is_empty")]
@@ -191,6 +194,7 @@ pub struct Recorder<'a> {
     cx_err: Vec<f64>,
     ms: Vec<f64>,
     lost_frames: usize,
+    depth_zoom_frames: usize,
     /// Also write overlay PNGs (`overlay/{camera}/{frame}.png`), as the app's export does.
     pub overlays: bool,
     /// The configuration the frames were fitted with, for metrics.json.
@@ -217,6 +221,7 @@ impl<'a> Recorder<'a> {
             cx_err: Vec::new(),
             ms: Vec::new(),
             lost_frames: 0,
+            depth_zoom_frames: 0,
             overlays: false,
             config: None,
             forest: None,
@@ -307,6 +312,7 @@ impl<'a> Recorder<'a> {
         }
         self.ms.push(f.ms);
         self.lost_frames += f.lost as usize;
+        self.depth_zoom_frames += f.depth_explains_zoom as usize;
         self.trajectory.frames.push(TrajectoryFrame {
             frame: t as u32,
             affine: f.state.affine.q.to_vec(),
@@ -322,6 +328,11 @@ impl<'a> Recorder<'a> {
             ms: Some(f.ms),
             confidence: Some(f.confidence),
             lost: Some(f.lost),
+            warnings: if f.depth_explains_zoom {
+                vec![crate::scene::trajectory::DEPTH_EXPLAINS_ZOOM.to_string()]
+            } else {
+                Vec::new()
+            },
         });
         Ok(())
     }
@@ -354,6 +365,7 @@ impl<'a> Recorder<'a> {
             mode: self.mode.name().into(),
             frames: self.trajectory.frames.len(),
             lost_frames: self.lost_frames,
+            depth_explains_zoom_frames: self.depth_zoom_frames,
             dice: (!self.all_dice.is_empty()).then(|| DiceSummary {
                 mean: mean(&self.all_dice),
                 by_structure: self

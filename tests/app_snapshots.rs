@@ -134,9 +134,19 @@ fn paint_train_track_scrub_and_review_the_demo() {
     press(&mut h, toggle, true);
     press(&mut h, toggle, false);
     h.run_steps(2);
-    assert!(h.state().view.hidden_in(0).seeds, "seeds hidden in the left view");
-    assert!(!h.state().view.hidden_in(1).seeds, "and still shown in the right view");
-    assert_eq!(h.state().doc.editor.counts(), painted, "the click painted nothing");
+    assert!(
+        h.state().view.hidden_in(0).seeds,
+        "seeds hidden in the left view"
+    );
+    assert!(
+        !h.state().view.hidden_in(1).seeds,
+        "and still shown in the right view"
+    );
+    assert_eq!(
+        h.state().doc.editor.counts(),
+        painted,
+        "the click painted nothing"
+    );
     move_to(&mut h, pos2(5.0, SIZE[1] - 5.0));
     shoot(&mut h, "app_probability_view");
 

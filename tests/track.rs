@@ -233,6 +233,40 @@ fn a_zoom_is_followed_by_focal_length_and_principal_point() {
         hidden(&m),
         hidden(&ls)
     );
+    // And says so: in LS the frames of the zoom warn that depth explained it, and their
+    // confidence falls below LSC's; LSC, which corrects the cameras there, warns of nothing.
+    assert_eq!(m["depth_explains_zoom_frames"], 0, "{m}");
+    let warned = ls["depth_explains_zoom_frames"].as_u64().unwrap();
+    assert!(warned >= 3, "LS frames warned: {warned}");
+    let frames = |dir: &Path| json(&dir.join("trajectory.json"))["frames"].clone();
+    let (lsc_frames, ls_frames) = (frames(&out), frames(&ls_out));
+    let mut lower = 0;
+    for (a, b) in lsc_frames
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip(ls_frames.as_array().unwrap())
+    {
+        let warns = b["warnings"]
+            .as_array()
+            .is_some_and(|w| w.iter().any(|x| x == "depth_explains_zoom"));
+        assert!(
+            a.get("warnings").is_none(),
+            "LSC frame {} warns",
+            a["frame"]
+        );
+        if warns {
+            assert!(
+                b["confidence"].as_f64().unwrap() < a["confidence"].as_f64().unwrap(),
+                "frame {}: LS confidence {} against LSC {}",
+                b["frame"],
+                b["confidence"],
+                a["confidence"]
+            );
+            lower += 1;
+        }
+    }
+    assert_eq!(lower as u64, warned);
     let cam = &m["camera"];
     assert!(cam["fx_rel_error_mean"].as_f64().unwrap() < 0.02, "{m}");
     assert!(cam["cx_error_px_mean"].as_f64().unwrap() < 1.0, "{m}");

@@ -33,7 +33,10 @@ pub enum AppCommand {
     SetHelpShown(bool),
     SetTransform(ViewTransform),
     /// Hide (or show again) seeds or the overlay in one view only.
-    ToggleInView { camera: usize, part: ViewPart },
+    ToggleInView {
+        camera: usize,
+        part: ViewPart,
+    },
     /// Brush or eraser size times `factor`.
     ResizeBrush(f32),
     BeginStroke,

@@ -342,6 +342,7 @@ impl EndofuseApp {
                     ms: f.ms,
                     dice: Vec::new(),
                     hidden_error_mm: self.hidden_errors(&f),
+                    depth_explains_zoom: f.depth_explains_zoom,
                 };
                 if self.view.follow_tracking {
                     self.view.frame = f.frame;
@@ -443,8 +444,22 @@ impl EndofuseApp {
                     )
                 })
                 .collect();
+            let by_depth = self
+                .doc
+                .results
+                .values()
+                .filter(|r| r.depth_explains_zoom)
+                .count();
+            let warning = if by_depth > 0 {
+                format!(
+                    " Warning: in {by_depth} frames the image zoomed and only depth could follow \
+                     (cameras fixed): hidden structures may be off there; LSC corrects the cameras."
+                )
+            } else {
+                String::new()
+            };
             self.status.notice = Some(format!(
-                "Fitted {} frame{} in mode {} ({lost} of all fitted frames lost){}.",
+                "Fitted {} frame{} in mode {} ({lost} of all fitted frames lost){}.{warning}",
                 busy.total,
                 if busy.total == 1 { "" } else { "s" },
                 self.doc.mode().name(),

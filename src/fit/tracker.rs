@@ -92,6 +92,9 @@ pub struct TrackedFrame {
     pub ms: f64,
     pub confidence: f64,
     pub lost: bool,
+    /// The apparent size changed as in a zoom with the cameras fixed: depth explained it, so
+    /// the hidden structures may be off (the confidence is lowered).
+    pub depth_explains_zoom: bool,
     /// Front-most visible structure per pixel, per camera.
     pub labels: Vec<LabelImage>,
     /// Each hidden structure's projection per camera (occlusion ignored).
@@ -217,6 +220,8 @@ struct FrameTracker<'a> {
     /// zoom.
     motion: MotionHistory,
     zoom: ZoomDetector,
+    /// The same test, in modes without camera correction: a zoom there is explained by depth.
+    depth_zoom: ZoomDetector,
 }
 
 /// One frame's fit and what the tracker made of it.
@@ -225,6 +230,8 @@ struct Outcome {
     /// The fit's state, or the last good one where the frame is lost.
     state: FitState,
     lost: bool,
+    /// The apparent size changed as in a zoom and only the pose could follow it.
+    depth_explains_zoom: bool,
 }
 
 impl<'a> FrameTracker<'a> {
@@ -309,6 +316,9 @@ impl<'a> FrameTracker<'a> {
             self.zoom.corrected(&self.good, &fit.state);
         }
         let (fit, lost) = self.placed_afresh_if_lost(t, views, fit);
+        let depth_explains_zoom = !correct_cameras
+            && !lost
+            && (in_zoom || (options.mode != Mode::LSC && self.size_changes_like_a_zoom(t, &fit)));
         // A lost frame keeps the last good state: nothing learnt from it.
         let state = if lost {
             self.motion.clear();
@@ -323,7 +333,24 @@ impl<'a> FrameTracker<'a> {
             }
             fit.state.clone()
         };
-        Ok(Outcome { fit, state, lost })
+        Ok(Outcome {
+            fit,
+            state,
+            lost,
+            depth_explains_zoom,
+        })
+    }
+
+    /// Without camera correction: did this frame's apparent size change as in a zoom (the
+    /// depth then took the zoom's place)? Against the frame just before only, as in LSC.
+    fn size_changes_like_a_zoom(&mut self, t: usize, fit: &FrameFit) -> bool {
+        if self.first || self.good_frame + 1 != t {
+            return false;
+        }
+        let model = self.ctx.model;
+        let centre = self.ctx.model_centre(&model.deformed(&self.good.shape));
+        self.depth_zoom
+            .changes_like_a_zoom(&self.good, &fit.state, centre)
     }
 
     /// A zoom the scene does not mark (LSC): the frame's apparent size jumped with the
@@ -414,6 +441,7 @@ pub fn track(
         lost_run: 0,
         motion: MotionHistory::new(options.config.zoom.motion),
         zoom: ZoomDetector::new(options.config.zoom.detector),
+        depth_zoom: ZoomDetector::new(options.config.zoom.detector),
     };
     for t in options.frames.0..=options.frames.1 {
         tracker.cancelled()?;
@@ -430,7 +458,12 @@ pub fn track(
                     .map(|f| ViewProbabilities::new(f, levels, classes.len()))
                     .collect()
             });
-        let Outcome { fit, state, lost } = tracker.frame(t, &mut views)?;
+        let Outcome {
+            fit,
+            state,
+            lost,
+            depth_explains_zoom,
+        } = tracker.frame(t, &mut views)?;
         let ms = started.elapsed().as_secs_f64() * 1e3;
         let Rendered {
             mut labels,
@@ -452,8 +485,15 @@ pub fn track(
             energy: fit.energy,
             iterations: fit.iterations,
             ms,
-            confidence: fit.confidence,
+            // Reported lower where depth stood in for a zoom (losing the frame is decided on
+            // the fit's own confidence).
+            confidence: if depth_explains_zoom {
+                fit.confidence * options.config.tracking.depth_zoom_confidence
+            } else {
+                fit.confidence
+            },
             lost,
+            depth_explains_zoom,
             labels,
             hidden,
             centroids,

@@ -48,6 +48,23 @@ impl ZoomDetector {
     /// A frame fitted with fixed intrinsics, from `before` (the last good state) to `after`:
     /// true when its apparent size changed fast enough to be a zoom (correction turns on).
     pub fn fires(&mut self, before: &FitState, after: &FitState, centre: DVec3) -> bool {
+        if self.changes_like_a_zoom(before, after, centre) {
+            self.active = true;
+            self.calm = 0;
+            self.last_change = None;
+        }
+        self.active
+    }
+
+    /// True when this frame's change of apparent size (with the intrinsics fixed) is as fast
+    /// and as steady as a zoom's; nothing is switched on. Modes without camera correction ask
+    /// this to say when depth alone explained a zoom (their confidence falls).
+    pub fn changes_like_a_zoom(
+        &mut self,
+        before: &FitState,
+        after: &FitState,
+        centre: DVec3,
+    ) -> bool {
         let (Some(a), Some(b)) = (apparent_size(before, centre), apparent_size(after, centre))
         else {
             return false;
@@ -57,12 +74,7 @@ impl ZoomDetector {
             .last_change
             .is_some_and(|c| c * change > 0.0 && (c + change).abs() > self.config.rate_two_frames);
         self.last_change = Some(change);
-        if sustained || change.abs() > self.config.rate_one_frame {
-            self.active = true;
-            self.calm = 0;
-            self.last_change = None;
-        }
-        self.active
+        sustained || change.abs() > self.config.rate_one_frame
     }
 
     /// A frame fitted with camera correction while a detected zoom is on: the zoom ends after

@@ -84,7 +84,20 @@ pub struct TrajectoryFrame {
         deserialize_with = "lenient"
     )]
     pub lost: Option<bool>,
+    /// What the tracker knows may be wrong in this frame although it looks right (an
+    /// extension of CONTRACT §3: readers ignore it). "depth_explains_zoom": the apparent size
+    /// changed as in a zoom with the cameras fixed, so the depth (and the hidden structures
+    /// with it) may be off.
+    #[serde(
+        default,
+        skip_serializing_if = "Vec::is_empty",
+        deserialize_with = "lenient"
+    )]
+    pub warnings: Vec<String>,
 }
+
+/// The warning of a frame where depth alone explained a change of apparent size.
+pub const DEPTH_EXPLAINS_ZOOM: &str = "depth_explains_zoom";
 
 /// Reads a value of the expected type, or its default when the file gives something else
 /// under the key (CONTRACT §3: readers ignore what they do not know, whatever its type).

@@ -258,7 +258,15 @@ pub fn review_window(shown: &Shown, ctx: &egui::Context) {
                     range: Some((0.0, 1.0)),
                     decimals: 0,
                 };
-                plot(ui, "confidence", "Confidence", axis, confidence, frame, 110.0);
+                plot(
+                    ui,
+                    "confidence",
+                    "Confidence",
+                    axis,
+                    confidence,
+                    frame,
+                    110.0,
+                );
                 let hidden = by_structure(shown, |r| &r.hidden_error_mm);
                 if !hidden.is_empty() {
                     // From 0: an error is read against none, not against the smallest one.

@@ -44,7 +44,7 @@ pub fn timeline(shown: &Shown, layout: &mut Layout, ui: &mut egui::Ui) {
                 let h = (r.confidence.clamp(0.0, 1.0) as f32) * (rect.height() - 8.0);
                 let col = if r.lost {
                     Color32::from_rgb(230, 60, 60)
-                } else if r.confidence < 0.5 {
+                } else if r.confidence < 0.5 || r.depth_explains_zoom {
                     Color32::from_rgb(230, 180, 50)
                 } else {
                     Color32::from_rgb(70, 200, 110)
@@ -149,9 +149,21 @@ pub fn timeline(shown: &Shown, layout: &mut Layout, ui: &mut egui::Ui) {
                 ui.label(format!(
                     "confidence {:.2}{}  ·  {:.0} ms",
                     r.confidence,
-                    if r.lost { " (lost)" } else { "" },
+                    if r.lost {
+                        " (lost)"
+                    } else if r.depth_explains_zoom {
+                        " (zoom followed by depth)"
+                    } else {
+                        ""
+                    },
                     r.ms
-                ));
+                ))
+                .on_hover_text(if r.depth_explains_zoom {
+                    "The image zoomed with the cameras fixed: only the depth could follow, so \
+                     the hidden structures may be off. LSC corrects the cameras."
+                } else {
+                    "How well the fitted contours separate the tissues"
+                });
                 if !r.dice.is_empty() {
                     let mean = r.dice.iter().map(|(_, d)| d).sum::<f64>() / r.dice.len() as f64;
                     ui.label(format!("Dice {mean:.3}"));

@@ -206,8 +206,18 @@ pub fn views(shown: &Shown, screen: &mut Screen, ui: &mut egui::Ui) {
 fn view_toggles(shown: &Shown, ui: &mut egui::Ui, camera: usize, rect: Rect) {
     let hidden = shown.view.hidden_in(camera);
     let parts = [
-        (ViewPart::Seeds, "seeds", hidden.seeds, shown.prefs.show_seeds),
-        (ViewPart::Overlay, "overlay", hidden.overlay, shown.prefs.show_overlay),
+        (
+            ViewPart::Seeds,
+            "seeds",
+            hidden.seeds,
+            shown.prefs.show_seeds,
+        ),
+        (
+            ViewPart::Overlay,
+            "overlay",
+            hidden.overlay,
+            shown.prefs.show_overlay,
+        ),
     ];
     let mut at = rect.left_top() + vec2(6.0, 22.0);
     for (part, label, is_hidden, globally_shown) in parts {

@@ -132,12 +132,18 @@ mod tests {
     #[test]
     fn the_scale_ends_where_the_map_does() {
         // p = 0 leaves the tissue untouched; p = 1 at full opacity is the class colour.
-        assert_eq!(over_grey(probability_rgba([0, 200, 0], 0.0), 1.0), Color32::from_gray(70));
+        assert_eq!(
+            over_grey(probability_rgba([0, 200, 0], 0.0), 1.0),
+            Color32::from_gray(70)
+        );
         assert_eq!(
             over_grey(probability_rgba([0, 200, 0], 1.0), 1.0),
             Color32::from_rgb(0, 200, 0)
         );
-        assert_eq!(over_grey(uncertainty_rgba(1.0), 1.0), Color32::from_rgb(255, 255, 0));
+        assert_eq!(
+            over_grey(uncertainty_rgba(1.0), 1.0),
+            Color32::from_rgb(255, 255, 0)
+        );
         // Half opacity: half-way to the colour.
         assert_eq!(
             over_grey(probability_rgba([170, 70, 70], 1.0), 0.5),

@@ -318,6 +318,10 @@ pub struct TrackingConfig {
     pub occluder_margin_px: f32,
     /// An inside pixel whose background/tool probability exceeds this is occluded.
     pub occluder_background: f32,
+    /// A frame whose change of apparent size only depth could explain (a zoom fitted without
+    /// camera correction: R, L, LS, or LSC outside a correction) reports its confidence times
+    /// this: the fit may look right while the hidden structures are off by the depth error.
+    pub depth_zoom_confidence: f64,
 }
 
 impl Default for TrackingConfig {
@@ -330,6 +334,7 @@ impl Default for TrackingConfig {
             reinit_after_lost: 3,
             occluder_margin_px: 3.0,
             occluder_background: 0.6,
+            depth_zoom_confidence: 0.5,
         }
     }
 }

@@ -180,6 +180,11 @@ impl FitConfig {
         within("tracking.max_fit_level", k.max_fit_level, 0..=4)?;
         within("tracking.lost_confidence", k.lost_confidence, 0.0..=1.0)?;
         within(
+            "tracking.depth_zoom_confidence",
+            k.depth_zoom_confidence,
+            0.0..=1.0,
+        )?;
+        within(
             "tracking.reinit_after_lost",
             k.reinit_after_lost,
             1..=10_000,

@@ -178,6 +178,7 @@ impl Phantom {
                 ms: None,
                 confidence: None,
                 lost: None,
+                warnings: Vec::new(),
             },
         }
     }
