@@ -24,8 +24,9 @@ pub enum Command {
     UseScene(Arc<Scene>),
     /// Replace the seeds of the scene in use (the app's painted strokes).
     SetSeeds(Seeds),
-    /// Use a forest the UI already holds (a loaded session).
-    SetAppearance(Arc<Appearance>),
+    /// Use a forest the UI already holds (a loaded session), or none (a session saved before
+    /// training).
+    SetAppearance(Option<Arc<Appearance>>),
     Train(ForestParams),
     /// Per-class probabilities of one frame in every view.
     Classify {
@@ -292,7 +293,7 @@ fn run(
             let scene = need_scene(state)?;
             state.scene = Some(Arc::new(scene.with_seeds(seeds)));
         }
-        Command::SetAppearance(a) => state.appearance = Some(a),
+        Command::SetAppearance(a) => state.appearance = a,
         Command::Train(params) => {
             let scene = need_scene(state)?;
             let model = Arc::new(Appearance::train(&scene, &params, Some(cancel))?);

@@ -14,7 +14,7 @@ use std::path::Path;
 
 mod common;
 
-use common::app::step_until;
+use common::app::{shoot, step_until};
 
 fn harness() -> Harness<'static, EndofuseApp> {
     Harness::builder()
@@ -60,7 +60,7 @@ fn unsaved_work_is_asked_about_and_help_lists_every_action() {
         h.state().status.busy.is_none(),
         "nothing is loading while the question is open"
     );
-    h.snapshot("app_unsaved_prompt");
+    shoot(&mut h, "app_unsaved_prompt");
     h.get_by_label("Cancel").click();
     h.run_steps(2);
     assert!(h.state().confirm.is_none());
@@ -93,7 +93,7 @@ fn unsaved_work_is_asked_about_and_help_lists_every_action() {
     for (a, b) in actions.iter().zip(before) {
         assert!(count(&h, *a) > b, "the help sheet lists {a:?}");
     }
-    h.snapshot("app_help_sheet");
+    shoot(&mut h, "app_help_sheet");
 }
 
 /// Where no system file dialog can open (no xdg-desktop-portal), every file action still works:
@@ -128,8 +128,15 @@ fn file_actions_fall_back_to_the_built_in_browser() {
         "the built-in browser opens"
     );
     let notice = h.state().status.notice.clone().unwrap_or_default();
-    assert!(notice.contains("not available"), "{notice}");
-    h.snapshot("app_file_browser");
+    assert!(
+        notice.contains("No system file dialog could open"),
+        "{notice}"
+    );
+    assert!(
+        h.state().prefs.builtin_file_browser,
+        "the File menu's preference says what the app now does"
+    );
+    shoot(&mut h, "app_file_browser");
     h.get_by_label("Save").click();
     h.run_steps(3);
     let saved = dir.join("session.endofuse.json");
@@ -147,7 +154,7 @@ fn file_actions_fall_back_to_the_built_in_browser() {
     h.run_steps(2);
     h.state().send(AppCommand::Action(Action::LoadSession));
     h.run_steps(3);
-    h.get_by_label("🗋 session.endofuse.json").click();
+    h.get_by_label("session.endofuse.json").click();
     h.run_steps(2);
     h.get_by_label("Open").click();
     h.run_steps(3);
@@ -179,7 +186,7 @@ fn file_actions_fall_back_to_the_built_in_browser() {
     h.state().send(AppCommand::Action(Action::SaveSeeds));
     h.run_steps(3);
     assert!(h.state().screen.browser.is_some());
-    h.get_by_label("Open").click();
+    h.get_by_label("Use this folder").click();
     h.run_steps(3);
     let notice = h.state().status.notice.clone().unwrap_or_default();
     assert!(notice.contains("seed PNGs"), "{notice}");

@@ -30,15 +30,7 @@ fn harness() -> Harness<'static, EndofuseApp> {
         })
 }
 
-fn shoot(h: &mut Harness<'_, EndofuseApp>, name: &str) {
-    step_until(h, "the frames", |_| true);
-    if std::env::var_os("UPDATE_SCREENSHOTS").is_some() {
-        let img = h.render().expect("render");
-        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("screenshots/{name}.png"));
-        img.save(&path).expect("write screenshot");
-    }
-    h.snapshot(name);
-}
+use common::app::shoot;
 
 fn press(h: &mut Harness<'_, EndofuseApp>, pos: Pos2, pressed: bool) {
     h.event(Event::PointerButton {

@@ -17,8 +17,6 @@ use std::sync::Arc;
 /// Where the app's files go, and the autosave's bookkeeping.
 pub struct Files {
     pub dialogs: Box<dyn Dialogs>,
-    /// The system dialog failed once: every later request goes to the built-in browser.
-    pub system_dialogs_failed: bool,
     /// The folder of the last path chosen, where the built-in browser starts.
     pub last_folder: Option<PathBuf>,
     /// Folder of autosaves (None: the app's data folder).
@@ -46,7 +44,6 @@ impl Files {
         let (autosaved_tx, autosaved_rx) = unbounded();
         Self {
             dialogs,
-            system_dialogs_failed: false,
             last_folder: None,
             autosave_dir: None,
             autosave_offer: None,
@@ -74,7 +71,7 @@ impl Files {
 }
 
 /// True when `path` is a session file (its text names the session format).
-fn is_session_file(path: &Path) -> bool {
+pub(super) fn is_session_file(path: &Path) -> bool {
     std::fs::read_to_string(path).is_ok_and(|t| t.contains(SESSION_FORMAT))
 }
 
@@ -132,13 +129,17 @@ impl EndofuseApp {
         }
         self.doc.settings = s.settings;
         self.doc.placement = s.placement.or(self.doc.placement);
-        if let Some(f) = s.forest {
-            if Some(&f.classes) == self.doc.classes.as_ref() {
-                self.use_forest(Arc::new(f));
-            } else {
-                self.status.notice =
-                    Some("The session's forest is for other classes: train again.".into());
+        match s.forest {
+            Some(f) if Some(&f.classes) == self.doc.classes.as_ref() => {
+                self.use_forest(Arc::new(f))
             }
+            Some(_) => {
+                self.drop_forest();
+                self.status
+                    .notify("The session's forest is for other classes: train again.");
+            }
+            // Saved before training: the forest trained since is not the session's.
+            None => self.drop_forest(),
         }
         self.doc.results = s
             .results
@@ -156,7 +157,8 @@ impl EndofuseApp {
         if path != autosave {
             self.doc.saved = self.doc.revision();
         }
-        self.status.notice = Some(format!("Session {} restored.", path.display()));
+        self.status
+            .notify(format!("Session {} restored.", path.display()));
     }
 
     pub(super) fn load_session_file(&mut self, path: &Path) {
@@ -193,7 +195,7 @@ impl EndofuseApp {
         match self.doc.session().save(path) {
             Ok(()) => {
                 self.doc.saved = self.doc.revision();
-                self.status.notice = Some(format!("Saved {}", path.display()));
+                self.status.notify(format!("Saved {}", path.display()));
                 // Saved under a name: the autosave is no longer needed, nor any still being
                 // written (it would offer to restore what was just saved).
                 self.files.generation += 1;
@@ -279,9 +281,9 @@ impl EndofuseApp {
 
     fn seeds_written(&mut self, result: Result<(usize, PathBuf), Error>) {
         match result {
-            Ok((n, dir)) => {
-                self.status.notice = Some(format!("Wrote {n} seed PNGs under {}", dir.display()))
-            }
+            Ok((n, dir)) => self
+                .status
+                .notify(format!("Wrote {n} seed PNGs under {}", dir.display())),
             Err(e) => self.status.fail(e),
         }
     }

@@ -127,8 +127,17 @@ impl EndofuseApp {
     }
 
     pub(super) fn use_forest(&mut self, forest: Arc<crate::appearance::Appearance>) {
-        self.send_job(Command::SetAppearance(forest.clone()));
+        self.send_job(Command::SetAppearance(Some(forest.clone())));
         self.doc.appearance = Some(forest);
+        self.doc.touch();
+    }
+
+    /// No forest (a session restored from before training): its maps go with it.
+    pub(super) fn drop_forest(&mut self) {
+        self.send_job(Command::SetAppearance(None));
+        self.doc.appearance = None;
+        self.jobs.probabilities.clear();
+        self.view.layer = super::state::Layer::Image;
         self.doc.touch();
     }
 
@@ -296,7 +305,7 @@ impl EndofuseApp {
                 self.scene_loaded(scene, model);
             }
             Event::Trained(a) => {
-                self.status.notice = Some(format!(
+                self.status.notify(format!(
                     "Forest trained on {} pixels in {:.2} s, out-of-bag error {:.2} %",
                     a.stats.samples,
                     a.stats.train_s,
@@ -321,8 +330,8 @@ impl EndofuseApp {
             Event::Initialised(a) => {
                 self.doc.placement = Some(a);
                 self.doc.touch();
-                self.status.notice =
-                    Some("Model placed: check it, then Fit this frame (F) or Track.".into());
+                self.status
+                    .notify("Model placed: check it, then Fit this frame (F) or Track.");
             }
             Event::Progress { task, done, total } => {
                 if let Some(b) = &mut self.status.busy
@@ -365,7 +374,7 @@ impl EndofuseApp {
             }
             Event::SceneCreated { scene_json } => {
                 self.screen.new_scene = None;
-                self.status.notice = Some(format!(
+                self.status.notify(format!(
                     "Created {}: paint seeds on the first frames, train (T), then track (Ctrl+T).",
                     scene_json.display()
                 ));
@@ -374,7 +383,7 @@ impl EndofuseApp {
             Event::Finished(task) => self.task_ended(task, true),
             Event::Cancelled(task) => {
                 self.task_ended(task, false);
-                self.status.notice = Some("Cancelled.".into());
+                self.status.notify("Cancelled.");
             }
             Event::Failed { task, message } => {
                 self.task_ended(task, false);
@@ -458,7 +467,7 @@ impl EndofuseApp {
             } else {
                 String::new()
             };
-            self.status.notice = Some(format!(
+            self.status.notify(format!(
                 "Fitted {} frame{} in mode {} ({lost} of all fitted frames lost){}.{warning}",
                 busy.total,
                 if busy.total == 1 { "" } else { "s" },
@@ -476,8 +485,8 @@ impl EndofuseApp {
                 if let Some(dir) = self.jobs.exporting.take()
                     && finished
                 {
-                    self.status.notice =
-                        Some(format!("Exported the tracked frames to {}", dir.display()));
+                    self.status
+                        .notify(format!("Exported the tracked frames to {}", dir.display()));
                 }
             }
             _ => {}

@@ -1,14 +1,16 @@
 //! Choosing a file or a folder: the system's dialog where it works, the built-in browser
-//! (egui_file) where it does not. Where no xdg-desktop-portal file chooser runs (minimal
+//! where it does not. Where no xdg-desktop-portal file chooser runs (minimal
 //! desktops, i3, many lab machines) the system dialog closes at once with nothing chosen, exactly
 //! like a cancel; a dialog that answers "nothing" faster than a person can cancel is taken as
-//! unavailable, said once in the status bar, and the request goes to the built-in browser, as
-//! every later one does (or all of them, when the preference says so). Every file action of the
+//! unavailable, said in the status bar, and the request goes to the built-in browser
+//! ([`super::panels::browser`]), as every later one does: the preference "Use the built-in file
+//! browser" is ticked for the user, who can untick it to try the system dialog again. Every file action of the
 //! app asks through [`EndofuseApp::request_path`] and is finished by [`EndofuseApp::path_chosen`],
 //! whichever picker answered.
 
 use super::EndofuseApp;
 use super::confirm::Confirm;
+use super::panels::browser::{Browser, Outcome};
 use super::panels::new_scene::Field;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -76,11 +78,9 @@ impl Dialogs for RfdDialogs {
         };
         match chosen {
             Some(p) => Picked::Chosen(p),
-            None if started.elapsed() < FASTEST_HUMAN_CANCEL => Picked::Unavailable(
-                "the system file dialog closed at once (no xdg-desktop-portal file chooser \
-                 and no zenity here?)"
-                    .into(),
-            ),
+            None if started.elapsed() < FASTEST_HUMAN_CANCEL => {
+                Picked::Unavailable("it needs an xdg-desktop-portal file chooser or zenity".into())
+            }
             None => Picked::Cancelled,
         }
     }
@@ -144,59 +144,22 @@ impl FileRequest {
     }
 }
 
-/// The built-in browser, open for one request.
-pub struct Browser {
-    pub request: FileRequest,
-    pub dialog: egui_file::FileDialog,
-}
-
-impl Browser {
-    /// A browser for `request`, starting in `folder`.
-    pub fn new(request: FileRequest, folder: &Path) -> Self {
-        let picker = request.picker();
-        let dialog = match &picker {
-            Picker::OpenFile { extensions, .. } => {
-                let extensions = extensions.clone();
-                egui_file::FileDialog::open_file().show_files_filter(Box::new(move |p: &Path| {
-                    extensions.is_empty()
-                        || p.extension()
-                            .and_then(|e| e.to_str())
-                            .is_some_and(|e| extensions.iter().any(|x| x.eq_ignore_ascii_case(e)))
-                }))
-            }
-            Picker::SaveFile { file_name, .. } => {
-                egui_file::FileDialog::save_file().default_filename(file_name.as_str())
-            }
-            Picker::Folder { .. } => egui_file::FileDialog::select_folder(),
-        };
-        let mut dialog = dialog
-            .title(picker.title())
-            .initial_path(folder)
-            .id(egui::Id::unique("endofuse-file-browser"))
-            // Renaming files has no place in a surgical planning tool.
-            .show_rename(false)
-            .keep_on_top(true)
-            .default_size(egui::vec2(620.0, 440.0))
-            .anchor(egui::Align2::CENTER_CENTER, egui::Vec2::ZERO);
-        dialog.open();
-        Self { request, dialog }
-    }
-}
-
 impl EndofuseApp {
     /// Asks for the path `request` needs: the system dialog (unless it failed before or the
     /// preference says otherwise), else the built-in browser. Finished by [`Self::path_chosen`],
     /// now or when the browser answers.
     pub fn request_path(&mut self, request: FileRequest, ctx: &egui::Context) {
-        if !self.prefs.builtin_file_browser && !self.files.system_dialogs_failed {
+        if !self.prefs.builtin_file_browser {
             match self.files.dialogs.pick(&request.picker()) {
                 Picked::Chosen(path) => return self.path_chosen(request, path, ctx),
                 Picked::Cancelled => return,
                 Picked::Unavailable(why) => {
-                    self.files.system_dialogs_failed = true;
-                    self.status.notice = Some(format!(
-                        "The system file dialog is not available: {why}. Using the built-in \
-                         file browser."
+                    // Remembered (File → "Use the built-in file browser" shows it, and
+                    // unticking it tries the system dialog again).
+                    self.prefs.builtin_file_browser = true;
+                    self.status.notify(format!(
+                        "No system file dialog could open ({why}): using the built-in file \
+                         browser from now on (File menu to change)."
                     ));
                 }
             }
@@ -221,18 +184,14 @@ impl EndofuseApp {
         let Some(browser) = self.screen.browser.as_mut() else {
             return;
         };
-        browser.dialog.show(ctx);
-        match browser.dialog.state() {
-            egui_file::State::Open => {}
-            egui_file::State::Selected => {
-                let path = browser.dialog.path().map(Path::to_path_buf);
-                if let Some(browser) = self.screen.browser.take()
-                    && let Some(path) = path
-                {
+        match browser.show(ctx) {
+            Outcome::Open => {}
+            Outcome::Cancelled => self.screen.browser = None,
+            Outcome::Chosen(path) => {
+                if let Some(browser) = self.screen.browser.take() {
                     self.path_chosen(browser.request, path, ctx);
                 }
             }
-            egui_file::State::Cancelled | egui_file::State::Closed => self.screen.browser = None,
         }
     }
 
@@ -245,6 +204,10 @@ impl EndofuseApp {
         };
         self.files.last_folder = folder.filter(|f| !f.as_os_str().is_empty());
         match request {
+            // A session picked where a scene was asked for: what the user meant is clear.
+            FileRequest::OpenScene if super::files::is_session_file(&path) => {
+                self.load_session_asking(path)
+            }
             FileRequest::OpenScene => self.open_scene_asking(&path.display().to_string()),
             FileRequest::LoadSession => self.load_session_asking(path),
             FileRequest::SaveSession { then } => {

@@ -279,6 +279,13 @@ impl Status {
         self.error = Some(message);
     }
 
+    /// Tells the user what just happened. An earlier error no longer describes the present
+    /// (it would hide this: "Saved …" under an old "Nothing tracked yet"), so it goes.
+    pub fn notify(&mut self, notice: impl Into<String>) {
+        self.error = None;
+        self.notice = Some(notice.into());
+    }
+
     /// A job starts: the previous job's notice ("Model placed…", "Exported to …") no longer
     /// describes what is on screen.
     pub fn busy_with(&mut self, task: Task, what: String, total: usize) {

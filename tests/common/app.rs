@@ -28,3 +28,16 @@ pub fn step_until(
     wait(h, "the frames", &|a| a.frames_ready());
     h.run_steps(2);
 }
+
+/// Once every view shows its frame, compares the app with its snapshot `name`; with UPDATE_SCREENSHOTS set, also writes it as
+/// the README's `screenshots/{name}.png`.
+pub fn shoot(h: &mut Harness<'_, EndofuseApp>, name: &str) {
+    step_until(h, "the frames", |_| true);
+    if std::env::var_os("UPDATE_SCREENSHOTS").is_some() {
+        let img = h.render().expect("render");
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join(format!("screenshots/{name}.png"));
+        img.save(&path).expect("write screenshot");
+    }
+    h.snapshot(name);
+}

@@ -1,7 +1,7 @@
 //! The menu bar (every action of the action table, grouped) and the status bar (the worker's
 //! progress with Cancel, the last error until dismissed, or the last notice).
 
-use super::{action_button, menu_item};
+use super::{action_button, menu_item, menu_item_if};
 use crate::app::Shown;
 use crate::app::actions::Action;
 use crate::app::commands::AppCommand;
@@ -29,7 +29,12 @@ pub fn menu_bar(shown: &Shown, ui: &mut egui::Ui) {
                 menu_item(shown, ui, Action::LoadSession);
                 menu_item(shown, ui, Action::SaveSession);
                 menu_item(shown, ui, Action::SaveSeeds);
-                menu_item(shown, ui, Action::Export);
+                let tracked = if shown.doc.results.is_empty() {
+                    Err("Track some frames first")
+                } else {
+                    Ok(())
+                };
+                menu_item_if(shown, ui, Action::Export, tracked);
                 ui.separator();
                 let mut builtin = shown.prefs.builtin_file_browser;
                 if ui

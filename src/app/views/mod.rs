@@ -47,7 +47,7 @@ pub struct Screen {
     /// File → New scene's form, while it is open.
     pub new_scene: Option<crate::app::panels::new_scene::NewSceneForm>,
     /// The built-in file browser, while it is open.
-    pub browser: Option<crate::app::pickers::Browser>,
+    pub browser: Option<crate::app::panels::browser::Browser>,
 }
 
 impl Screen {
