@@ -21,6 +21,10 @@ pub struct ForestMetrics {
     pub oob_error: f64,
     pub oob_balanced_error: f64,
     pub samples: usize,
+    /// Leave-one-seeded-frame-out agreement on the strokes (classes weighed equally): what
+    /// the out-of-bag error cannot say about new frames. Absent with one seeded image.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub held_out: Option<crate::appearance::validate::Validation>,
 }
 
 /// What `classify` writes to metrics.json.
@@ -122,6 +126,7 @@ pub fn run(
             oob_error: model.stats.oob_error,
             oob_balanced_error: model.stats.oob_balanced_error,
             samples: model.stats.samples,
+            held_out: model.validation.clone(),
         },
         pixel_dice: mean_dice(&|_| true),
         pixel_dice_unseeded: mean_dice(&|t| !seeded.contains(&t)),

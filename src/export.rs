@@ -141,6 +141,22 @@ pub fn check_export_folder(dir: &Path) -> Result<ExportFolder, crate::error::Inp
             "is a file, not a folder",
         ));
     }
+    // An export nested in an earlier one (a mis-click after the browser reopened there) would
+    // mix with its files.
+    if let Some(outer) = dir
+        .ancestors()
+        .skip(1)
+        .find(|a| a.join(EXPORT_MARKER).is_file())
+    {
+        return Err(crate::error::InputError::new(
+            dir,
+            format!(
+                "is inside the earlier export {}: choose a folder outside it (or that folder \
+                 itself, to replace it)",
+                outer.display()
+            ),
+        ));
+    }
     let mut entries = match std::fs::read_dir(dir) {
         Ok(e) => e,
         Err(_) => return Ok(ExportFolder::Fresh),
@@ -212,6 +228,9 @@ mod tests {
         std::fs::write(dir.join(EXPORT_MARKER), "").unwrap();
         assert_eq!(check_export_folder(&dir), Ok(ExportFolder::EarlierExport));
         assert!(check_export_folder(&dir.join("ls")).is_err());
+        // Not nested in an earlier export, new or not.
+        let err = check_export_folder(&dir.join("again")).unwrap_err();
+        assert!(err.problem.contains("inside the earlier export"), "{err}");
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -218,13 +218,24 @@ fn run(cli: Cli) -> Result<()> {
             let metrics =
                 endofuse::classify::run(&scene, &out, range, &params, None, &progress("classify"))?;
             eprintln!(
-                "classify: forest of {} trees trained in {:.2} s on {} seeded pixels (out-of-bag error {:.3}); {:.1} ms per view",
+                "classify: forest of {} trees trained in {:.2} s on {} seeded pixels; {:.1} ms per view",
                 metrics.forest.trees,
                 metrics.forest.train_s,
                 metrics.forest.samples,
-                metrics.forest.oob_error,
                 metrics.ms_per_view
             );
+            match &metrics.forest.held_out {
+                Some(v) => eprintln!(
+                    "classify: strokes of a seeded {} left out: {:.1} % labelled right (classes weighed equally; worst class {:.1} %), over {} folds",
+                    v.left_out,
+                    100.0 * v.balanced_accuracy,
+                    100.0 * v.worst_class_accuracy,
+                    v.folds
+                ),
+                None => eprintln!(
+                    "classify: one seeded image: no held-out check (seed a second frame for one)"
+                ),
+            }
             for (class, d) in &metrics.pixel_dice {
                 eprintln!("classify: pixel Dice {class}: {d:.3}");
             }

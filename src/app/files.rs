@@ -130,6 +130,12 @@ impl EndofuseApp {
         self.doc.settings = s.settings;
         self.doc.placement = s.placement.or(self.doc.placement);
         match s.forest {
+            Some(f) if f.feature_set != crate::appearance::features::FEATURE_SET => {
+                self.drop_forest();
+                self.status.notify(
+                    "The session's forest was trained on an earlier feature set: train again (T).",
+                );
+            }
             Some(f) if Some(&f.classes) == self.doc.classes.as_ref() => {
                 self.use_forest(Arc::new(f))
             }

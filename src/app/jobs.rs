@@ -305,11 +305,17 @@ impl EndofuseApp {
                 self.scene_loaded(scene, model);
             }
             Event::Trained(a) => {
+                let check = match &a.validation {
+                    Some(v) => format!(
+                        "; with each seeded {} left out in turn, {:.0} % of its strokes are labelled right",
+                        v.left_out,
+                        100.0 * v.balanced_accuracy
+                    ),
+                    None => "; seed a second frame to check it on strokes it did not learn".into(),
+                };
                 self.status.notify(format!(
-                    "Forest trained on {} pixels in {:.2} s, out-of-bag error {:.2} %",
-                    a.stats.samples,
-                    a.stats.train_s,
-                    a.stats.oob_error * 100.0
+                    "Forest trained on {} pixels in {:.2} s{check}.",
+                    a.stats.samples, a.stats.train_s
                 ));
                 self.doc.appearance = Some(a);
                 self.doc.touch();

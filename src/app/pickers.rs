@@ -197,11 +197,9 @@ impl EndofuseApp {
 
     /// Does what `request` asked a path for.
     pub fn path_chosen(&mut self, request: FileRequest, path: PathBuf, ctx: &egui::Context) {
-        let folder = if path.is_dir() {
-            Some(path.clone())
-        } else {
-            path.parent().map(Path::to_path_buf)
-        };
+        // The next browser starts beside what was chosen (a chosen folder's parent: reopening
+        // inside an export invites nesting another in it).
+        let folder = path.parent().map(Path::to_path_buf);
         self.files.last_folder = folder.filter(|f| !f.as_os_str().is_empty());
         match request {
             // A session picked where a scene was asked for: what the user meant is clear.

@@ -4,6 +4,7 @@
 
 pub mod features;
 pub mod forest;
+pub mod validate;
 
 pub use features::{FEATURE_COUNT, FrameFeatures};
 pub use forest::{Forest, ForestParams, Samples, TrainStats};
@@ -74,6 +75,15 @@ pub struct Appearance {
     pub classes: ClassMap,
     pub forest: Forest,
     pub stats: TrainStats,
+    /// The features the forest was trained on ([`features::FEATURE_SET`]; empty in sessions
+    /// saved before it was recorded). A forest of another set must not be walked: its splits
+    /// would read other features.
+    #[serde(default)]
+    pub feature_set: String,
+    /// How well forests trained without one seeded frame label that frame's strokes: what
+    /// the out-of-bag error cannot say (None: fewer than two seeded frames or views).
+    #[serde(default)]
+    pub validation: Option<validate::Validation>,
 }
 
 /// Per-pixel class probabilities of one frame.
@@ -164,15 +174,22 @@ impl Appearance {
     ) -> Result<Appearance, Error> {
         let started = std::time::Instant::now();
         let classes = ClassMap::from_scene(scene);
-        let samples = collect_samples(scene, &classes, cancel)?;
+        let (samples, groups) = collect_grouped(scene, &classes, cancel)?;
         let (forest, mut stats) = Forest::train(&samples, classes.len(), params)
             .map_err(|e| InputError::new(seeds_origin(scene), e.to_string()))?;
+        let validation =
+            validate::held_out(&samples, &groups.ids, classes.len(), params).map(|mut v| {
+                v.left_out = groups.by.to_string();
+                v
+            });
         // Report what the user waits for: reading seeded frames, features and the forest.
         stats.train_s = started.elapsed().as_secs_f64();
         Ok(Appearance {
             classes,
             forest,
             stats,
+            feature_set: features::FEATURE_SET.to_string(),
+            validation,
         })
     }
 
@@ -230,6 +247,23 @@ pub fn collect_samples(
     classes: &ClassMap,
     cancel: Option<&AtomicBool>,
 ) -> Result<Samples, Error> {
+    collect_grouped(scene, classes, cancel).map(|(s, _)| s)
+}
+
+/// Each training sample's group, and what a group is ("frame" or "view").
+struct Groups {
+    ids: Vec<u32>,
+    by: &'static str,
+}
+
+/// [`collect_samples`], with each sample's group: its seeded frame (all views of a frame are one
+/// group: the other view of the same moment is no test), or its view when only one frame is
+/// seeded.
+fn collect_grouped(
+    scene: &Scene,
+    classes: &ClassMap,
+    cancel: Option<&AtomicBool>,
+) -> Result<(Samples, Groups), Error> {
     let origin = seeds_origin(scene);
     let jobs: Vec<(usize, usize)> = scene
         .seeds
@@ -245,6 +279,9 @@ pub fn collect_samples(
         )
         .into());
     }
+    let frames: std::collections::BTreeSet<usize> = jobs.iter().map(|&(_, t)| t).collect();
+    let group_of =
+        |c: usize, t: usize| -> u32 { if frames.len() > 1 { t as u32 } else { c as u32 } };
     let per_job: Vec<Result<Vec<(features::FeatureVector, u8)>, Error>> = jobs
         .par_iter()
         .map(|&(c, t)| {
@@ -277,7 +314,7 @@ pub fn collect_samples(
                     img = features::downsample(&img);
                     lab = downsample_seeds(&lab);
                 }
-                let ff = FrameFeatures::new(&img);
+                let ff = FrameFeatures::at_level(&img, level);
                 out.extend(lab.data.iter().enumerate().filter_map(|(i, &v)| {
                     classes
                         .class_of_seed(v)
@@ -287,10 +324,11 @@ pub fn collect_samples(
             Ok(out)
         })
         .collect();
-    let mut by_class: Vec<Vec<features::FeatureVector>> = vec![Vec::new(); classes.len()];
-    for job in per_job {
+    let mut by_class: Vec<Vec<(features::FeatureVector, u32)>> = vec![Vec::new(); classes.len()];
+    for (job, &(c, t)) in per_job.into_iter().zip(&jobs) {
+        let g = group_of(c, t);
         for (f, k) in job? {
-            by_class[k as usize].push(f);
+            by_class[k as usize].push((f, g));
         }
     }
     for (k, v) in by_class.iter().enumerate() {
@@ -308,11 +346,14 @@ pub fn collect_samples(
         }
     }
     let mut samples = Samples::default();
+    let mut groups = Vec::new();
     for (k, v) in by_class.into_iter().enumerate() {
         let step = v.len().div_ceil(MAX_SAMPLES_PER_CLASS).max(1);
-        for f in v.into_iter().step_by(step) {
+        for (f, g) in v.into_iter().step_by(step) {
             samples.push(f, k as u8);
+            groups.push(g);
         }
     }
-    Ok(samples)
+    let by = if frames.len() > 1 { "frame" } else { "view" };
+    Ok((samples, Groups { ids: groups, by }))
 }

@@ -181,14 +181,14 @@ impl ViewProbabilities {
                 y1 = y1.max(oy + oh - 1);
             }
             // Margin: the widest window, plus slack so small motions need no rebuild.
-            let margin = crate::appearance::features::reach_for_width(image.width() as usize) + 16;
+            let margin = crate::appearance::features::reach_for_level(level) + 16;
             let (iw, ih) = (image.width() as usize, image.height() as usize);
             let (rx0, ry0) = (x0.saturating_sub(margin), y0.saturating_sub(margin));
             let (rx1, ry1) = ((x1 + margin).min(iw - 1), (y1 + margin).min(ih - 1));
             lv.region = Some((rx0, ry0, rx1 + 1 - rx0, ry1 + 1 - ry0));
             lv.features = Some(super::profile::time(
                 super::profile::Phase::Features,
-                || FrameFeatures::region(&image, rx0, ry0, rx1 + 1 - rx0, ry1 + 1 - ry0),
+                || FrameFeatures::region(&image, level, rx0, ry0, rx1 + 1 - rx0, ry1 + 1 - ry0),
             ));
         }
         let Some(features) = lv.features.as_ref() else {

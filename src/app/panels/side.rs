@@ -135,15 +135,41 @@ fn side_contents(shown: &Shown, ui: &mut egui::Ui) {
     if let Some(a) = &doc.appearance {
         // The out-of-bag error only says how separable the strokes are, not how good the
         // maps are away from them: on hover, with that said.
-        ui.label(format!(
-            "trained on {} px in {:.2} s",
-            a.stats.samples, a.stats.train_s
-        ))
-        .on_hover_text(format!(
-            "Out-of-bag error {:.2} %: how well the forest separates the painted pixels, \
-             not how good the maps are elsewhere. Check the probability and uncertainty views.",
-            a.stats.oob_error * 100.0
-        ));
+        let check = match &a.validation {
+            Some(v) => format!(
+                "held-out {:.0} % (worst {:.0} %)",
+                100.0 * v.balanced_accuracy,
+                100.0 * v.worst_class_accuracy
+            ),
+            None => "seed a 2nd frame to check".into(),
+        };
+        let colour = match &a.validation {
+            Some(v) if v.worst_class_accuracy < 0.8 => Color32::from_rgb(255, 190, 70),
+            _ => ui.visuals().text_color(),
+        };
+        ui.horizontal(|ui| {
+            ui.label(format!("{} px, {:.2} s", a.stats.samples, a.stats.train_s))
+                .on_hover_text(format!(
+                    "Trained on {} painted pixels in {:.2} s. Out-of-bag error {:.2} %: how well \
+                     the forest separates the painted pixels, not how good the maps are \
+                     elsewhere.",
+                    a.stats.samples,
+                    a.stats.train_s,
+                    a.stats.oob_error * 100.0
+                ));
+            ui.colored_label(colour, check)
+                .on_hover_text(match &a.validation {
+                    Some(v) => format!(
+                        "A forest that learnt every seeded {0} but one labels the left-out {0}'s \
+                     strokes right this often (classes weighed equally; {1} folds): a guide to \
+                     frames it never saw. Low: paint where the maps are wrong, on more frames.",
+                        v.left_out, v.folds
+                    ),
+                    None => "With strokes on two or more frames (or views), the forest is checked \
+                         on strokes it did not learn."
+                        .to_string(),
+                });
+        });
     } else {
         ui.label(RichText::new("not trained yet").weak());
     }

@@ -33,8 +33,11 @@ fn over_grey(rgba: [u8; 4], opacity: f32) -> Color32 {
     Color32::from_rgb(mix(rgba[0]), mix(rgba[1]), mix(rgba[2]))
 }
 
-/// The bar's title and colour at value v ∈ [0, 1], for the layer shown (None for the image).
-fn scale_of(shown: &Shown, layer: Layer) -> Option<(String, Box<dyn Fn(f32) -> [u8; 4]>)> {
+/// The colour and alpha of a map value v ∈ [0, 1].
+type Colouring = Box<dyn Fn(f32) -> [u8; 4]>;
+
+/// The bar's title and colouring, for the layer shown (None for the image).
+fn scale_of(shown: &Shown, layer: Layer) -> Option<(String, Colouring)> {
     match layer {
         Layer::Image => None,
         Layer::Probability(k) => {
