@@ -115,11 +115,8 @@ fn production(img: &RgbImage) -> Vec<FeatureVector> {
     FrameFeatures::new(img).all()
 }
 
-/// A specular highlight: near-saturated and almost colourless.
 fn specular(p: &image::Rgb<u8>) -> bool {
-    let [r, g, b] = p.0;
-    let (hi, lo) = (r.max(g).max(b) as f32, r.min(g).min(b) as f32);
-    hi >= 230.0 && (hi - lo) / hi.max(1.0) < 0.25
+    endofuse::appearance::features::is_specular(p.0)
 }
 
 /// Grey-world colour constancy: each channel scaled so its mean over the non-specular pixels
@@ -153,19 +150,19 @@ fn grey_world_production(img: &RgbImage) -> Vec<FeatureVector> {
 
 const VARIANTS: &[Variant] = &[
     Variant {
-        name: "production features",
-        features: production,
-        skip_specular: false,
-    },
-    Variant {
-        name: "+ speculars left out of training",
+        name: "features as shipped (highlights left out of training)",
         features: production,
         skip_specular: true,
     },
     Variant {
+        name: "highlights kept",
+        features: production,
+        skip_specular: false,
+    },
+    Variant {
         name: "+ grey-world colour constancy",
         features: grey_world_production,
-        skip_specular: false,
+        skip_specular: true,
     },
 ];
 
@@ -309,17 +306,139 @@ fn time_features() {
     println!();
 }
 
+/// One widened phantom (`synth --vary-look`): strokes on frames 0–2 (the phantom's own),
+/// per-class Dice on frames 3, 5, 7, 9 of both views; with `sklearn`, the same samples and test
+/// features exported under `dir` for scikit-learn.
+fn widened_phantom(seed: u64, width: u32, height: u32, dir: Option<&Path>) -> Vec<f64> {
+    use endofuse::appearance::{Appearance, ClassMap, collect_samples};
+    let scene = endofuse::synth::memory_scene(&endofuse::synth::SynthOptions {
+        frames: 10,
+        seed,
+        width,
+        height,
+        noise: 0.03,
+        vary_look: true,
+        ..Default::default()
+    })
+    .expect("a phantom");
+    let classes = ClassMap::from_scene(&scene);
+    let model = Appearance::train(&scene, &ForestParams::default(), None).expect("seeds");
+    let (mut inter, mut sizes) = (vec![0usize; classes.len()], vec![0usize; classes.len()]);
+    let mut test_x: Vec<u8> = Vec::new();
+    let mut test_y: Vec<u8> = Vec::new();
+    for t in [3usize, 5, 7, 9] {
+        for c in 0..scene.cameras.len() {
+            let frame = scene.frame(c, t).unwrap();
+            let maps = model.classify_frame(&frame);
+            let gt = scene.ground_truth_labels(c, t).unwrap().unwrap();
+            let k = classes.len();
+            for (i, &l) in gt.data.iter().enumerate() {
+                let truth = classes.class_of_label(l).unwrap_or(0);
+                let said = argmax(&maps.data[i * k..(i + 1) * k]);
+                sizes[truth] += 1;
+                sizes[said] += 1;
+                inter[truth] += (said == truth) as usize * 2;
+            }
+            if dir.is_some() {
+                test_x.extend(FrameFeatures::new(&frame).all().into_iter().flatten());
+                test_y.extend(
+                    gt.data
+                        .iter()
+                        .map(|&l| classes.class_of_label(l).unwrap_or(0) as u8),
+                );
+            }
+        }
+    }
+    if let Some(dir) = dir {
+        let d = dir.join(format!("synth-{seed}"));
+        std::fs::create_dir_all(&d).unwrap();
+        let train = collect_samples(&scene, &classes, None).unwrap();
+        let flat: Vec<u8> = train
+            .features
+            .iter()
+            .flat_map(|f| f.iter().copied())
+            .collect();
+        std::fs::write(d.join("train_x.u8"), flat).unwrap();
+        std::fs::write(d.join("train_y.u8"), &train.classes).unwrap();
+        std::fs::write(d.join("test_x.u8"), test_x).unwrap();
+        std::fs::write(d.join("test_y.u8"), test_y).unwrap();
+        std::fs::write(
+            d.join("meta.json"),
+            format!(
+                "{{\"features\": {}, \"classes\": {}}}",
+                endofuse::appearance::FEATURE_COUNT,
+                classes.len()
+            ),
+        )
+        .unwrap();
+    }
+    (0..classes.len())
+        .map(|k| inter[k] as f64 / sizes[k].max(1) as f64)
+        .collect()
+}
+
+/// Tuning and test phantoms of the widened synth, fixed before the features were chosen.
+const TUNING_PHANTOMS: [(u64, u32, u32); 3] = [(101, 480, 270), (102, 960, 540), (103, 320, 180)];
+const TEST_PHANTOMS: [(u64, u32, u32); 4] = [
+    (201, 480, 270),
+    (202, 480, 270),
+    (203, 960, 540),
+    (204, 640, 360),
+];
+
+fn phantoms(sklearn: Option<&Path>) {
+    println!();
+    println!(
+        "Widened phantoms (synth --vary-look, noise 0.03, tools, smoke; strokes on frames 0-2, Dice on 3, 5, 7, 9, both views)"
+    );
+    println!();
+    println!("| set | seed, size | kidney | tumour |");
+    println!("|---|---|---|---|");
+    for (set, list) in [
+        ("tuning", &TUNING_PHANTOMS[..]),
+        ("test", &TEST_PHANTOMS[..]),
+    ] {
+        for &(seed, w, h) in list {
+            let d = widened_phantom(seed, w, h, sklearn);
+            println!("| {set} | {seed}, {w}×{h} | {:.3} | {:.3} |", d[1], d[2]);
+        }
+    }
+}
+
 fn main() {
     time_features();
+    let sklearn_dir = std::env::var_os("APPEARANCE_SKLEARN")
+        .map(|_| Path::new(env!("CARGO_MANIFEST_DIR")).join("target/appearance-heldout"));
+    if let Some(d) = &sklearn_dir {
+        let _ = std::fs::remove_dir_all(d);
+        std::fs::create_dir_all(d).unwrap();
+    }
+    if std::env::var_os("APPEARANCE_NO_PHANTOMS").is_none() {
+        phantoms(sklearn_dir.as_deref());
+    }
     let dir = data_dir();
-    if !dir.is_dir() {
+    if dir.is_dir() {
+        real_frames(&dir, sklearn_dir.as_deref());
+    } else {
         eprintln!(
-            "no real frames at {} (set ENDOVIS_FRAMES): nothing to measure",
+            "no real frames at {} (set ENDOVIS_FRAMES): only the phantoms measured",
             dir.display()
         );
-        return;
     }
-    let frames = load_frames(&dir);
+    if let Some(out) = sklearn_dir {
+        let py = std::process::Command::new("python3")
+            .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("benches/appearance_sklearn.py"))
+            .arg(&out)
+            .status();
+        if !py.is_ok_and(|s| s.success()) {
+            eprintln!("the scikit-learn half failed (python3 with scikit-learn and scikit-image)");
+        }
+    }
+}
+
+/// The real-frame table (and its export for scikit-learn).
+fn real_frames(dir: &Path, sklearn: Option<&Path>) {
+    let frames = load_frames(dir);
     let tuning: Vec<&Frame> = frames
         .iter()
         .filter(|f| f.name.starts_with("c16"))
@@ -328,6 +447,7 @@ fn main() {
         .iter()
         .filter(|f| !f.name.starts_with("c16"))
         .collect();
+    println!();
     println!(
         "EndoVis 2018 real frames, kidney Dice; tuning set {} frames ({}), test set {} frames ({})",
         tuning.len(),
@@ -360,15 +480,7 @@ fn main() {
         all_kidney(&tuning),
         all_kidney(&test)
     );
-    if std::env::var_os("APPEARANCE_SKLEARN").is_some() {
-        let out = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/appearance-heldout");
-        export(&frames, &out);
-        let py = std::process::Command::new("python3")
-            .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("benches/appearance_sklearn.py"))
-            .arg(&out)
-            .status();
-        if !py.is_ok_and(|s| s.success()) {
-            eprintln!("the scikit-learn half failed (python3 with scikit-learn and scikit-image)");
-        }
+    if let Some(out) = sklearn {
+        export(&frames, out);
     }
 }

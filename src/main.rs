@@ -107,6 +107,10 @@ enum Command {
         /// No smoke haze.
         #[arg(long)]
         no_smoke: bool,
+        /// Draw the look from the seed: light colour and strength, glints, kidney tint, texture
+        /// scale, blood-like patches beside the kidney, blur (a wider test of the classifier).
+        #[arg(long)]
+        vary_look: bool,
         /// Render these structures (an `import-ct` output, or kidney.obj + tumour_*.obj)
         /// instead of the built-in anatomy.
         #[arg(long)]
@@ -430,6 +434,7 @@ fn run(cli: Cli) -> Result<()> {
             no_tools,
             no_zoom,
             no_smoke,
+            vary_look,
             meshes,
             calib,
         }) => {
@@ -466,6 +471,7 @@ fn run(cli: Cli) -> Result<()> {
                 tools: !no_tools,
                 zoom: !no_zoom,
                 smoke: !no_smoke,
+                vary_look,
                 ..SynthOptions::default()
             };
             let started = std::time::Instant::now();

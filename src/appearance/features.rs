@@ -369,6 +369,16 @@ impl FrameFeatures {
     }
 }
 
+/// A specular highlight: near-saturated and almost colourless. Its colour is the light's, not
+/// the tissue's, so it neither trains the forest nor votes in the fit.
+#[inline]
+pub fn is_specular(rgb: [u8; 3]) -> bool {
+    let [r, g, b] = rgb;
+    let (hi, lo) = (r.max(g).max(b) as u32, r.min(g).min(b) as u32);
+    // hi ≥ 230 and (hi − lo) / hi < 0.25, in integers.
+    hi >= 230 && 4 * (hi - lo) < hi
+}
+
 /// Row buffers of [`FrameFeatures::all`], one set per worker.
 struct RowScratch {
     means: Vec<Vec<f32>>,
@@ -588,6 +598,15 @@ mod tests {
             assert_eq!(o, FEATURE_COUNT);
         }
         assert_eq!(feature_names().len(), FEATURE_COUNT);
+    }
+
+    #[test]
+    fn highlights_are_bright_and_colourless() {
+        assert!(is_specular([255, 255, 255]));
+        assert!(is_specular([240, 232, 220]));
+        // Bright but coloured (reddish fat in the light), or colourless but grey: tissue.
+        assert!(!is_specular([250, 150, 140]));
+        assert!(!is_specular([200, 200, 200]));
     }
 
     #[test]

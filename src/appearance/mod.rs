@@ -282,7 +282,9 @@ fn collect_grouped(
     let frames: std::collections::BTreeSet<usize> = jobs.iter().map(|&(_, t)| t).collect();
     let group_of =
         |c: usize, t: usize| -> u32 { if frames.len() > 1 { t as u32 } else { c as u32 } };
-    let per_job: Vec<Result<Vec<(features::FeatureVector, u8)>, Error>> = jobs
+    // Per seeded pixel: features, class, and whether it is a specular highlight.
+    type Sample = (features::FeatureVector, u8, bool);
+    let per_job: Vec<Result<Vec<Sample>, Error>> = jobs
         .par_iter()
         .map(|&(c, t)| {
             if cancel.is_some_and(|f| f.load(Ordering::Relaxed)) {
@@ -315,20 +317,39 @@ fn collect_grouped(
                     lab = downsample_seeds(&lab);
                 }
                 let ff = FrameFeatures::at_level(&img, level);
+                let rgb = img.as_raw();
                 out.extend(lab.data.iter().enumerate().filter_map(|(i, &v)| {
-                    classes
-                        .class_of_seed(v)
-                        .map(|k| (ff.at(i % lab.width, i / lab.width), k as u8))
+                    classes.class_of_seed(v).map(|k| {
+                        let p = [rgb[3 * i], rgb[3 * i + 1], rgb[3 * i + 2]];
+                        (
+                            ff.at(i % lab.width, i / lab.width),
+                            k as u8,
+                            features::is_specular(p),
+                        )
+                    })
                 }));
             }
             Ok(out)
         })
         .collect();
     let mut by_class: Vec<Vec<(features::FeatureVector, u32)>> = vec![Vec::new(); classes.len()];
+    let mut highlights: Vec<Vec<(features::FeatureVector, u32)>> = vec![Vec::new(); classes.len()];
     for (job, &(c, t)) in per_job.into_iter().zip(&jobs) {
         let g = group_of(c, t);
-        for (f, k) in job? {
-            by_class[k as usize].push((f, g));
+        for (f, k, specular) in job? {
+            let to = if specular {
+                &mut highlights
+            } else {
+                &mut by_class
+            };
+            to[k as usize].push((f, g));
+        }
+    }
+    // Highlights show the light, not the tissue: they train nothing, unless a class was
+    // painted on highlights alone (then they are all it has).
+    for (v, h) in by_class.iter_mut().zip(highlights) {
+        if v.is_empty() {
+            *v = h;
         }
     }
     for (k, v) in by_class.iter().enumerate() {

@@ -203,6 +203,17 @@ impl ViewProbabilities {
         }
     }
 
+    /// Is the pixel (an index of `level`) a specular highlight? Its probabilities then do not
+    /// vote (the lines count it as undecided). False where the probabilities came from labels.
+    #[inline]
+    pub fn is_specular(&self, level: usize, pixel: u32) -> bool {
+        self.levels[level].image.as_ref().is_some_and(|img| {
+            let w = img.width();
+            let (x, y) = (pixel % w, pixel / w);
+            y < img.height() && crate::appearance::features::is_specular(img.get_pixel(x, y).0)
+        })
+    }
+
     /// Probability of `class` at a pixel index of `level` (must have been ensured).
     #[inline]
     pub fn get(&self, level: usize, pixel: u32, class: usize) -> f32 {

@@ -2,6 +2,7 @@
 //! scene folder (CONTRACT §2), and the built-in demo is the same generator run in memory.
 
 pub mod anatomy;
+pub mod look;
 pub mod phantom;
 pub mod seeds;
 pub mod texture;
@@ -48,6 +49,9 @@ pub struct SynthOptions {
     /// intrinsics with their distortion, extrinsics. The zoom then scales focal length and
     /// principal point and keeps the lens's distortion.
     pub cameras: Option<Vec<Camera>>,
+    /// Draw the look (light colour and strength, glints, kidney tint, texture scale, blood-like
+    /// patches, blur) from the seed instead of the default phantom's ([`look::Look`]).
+    pub vary_look: bool,
 }
 
 impl Default for SynthOptions {
@@ -67,6 +71,7 @@ impl Default for SynthOptions {
             initial_offset_deg: 5.0,
             structures: None,
             cameras: None,
+            vary_look: false,
         }
     }
 }

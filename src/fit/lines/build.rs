@@ -173,9 +173,13 @@ impl FrameContext<'_> {
                 for line in &mut view_lines {
                     let class = self.class_of[line.structure].unwrap_or(0);
                     for s in &mut line.samples {
-                        let p = view
-                            .get(params.level, s.pixel, class)
-                            .clamp(params.probability_floor, 1.0 - params.probability_floor);
+                        // A highlight shows the light, not the tissue: undecided.
+                        let p = if view.is_specular(params.level, s.pixel) {
+                            0.5
+                        } else {
+                            view.get(params.level, s.pixel, class)
+                        }
+                        .clamp(params.probability_floor, 1.0 - params.probability_floor);
                         s.p_f = p;
                         s.g_f = -p.ln();
                         s.g_b = -(1.0 - p).ln();

@@ -64,6 +64,7 @@ pub struct Phantom {
     tools: Vec<Tool>,
     background: Mesh,
     pub zoom_range: Option<(usize, usize)>,
+    look: crate::synth::look::Look,
 }
 
 impl Phantom {
@@ -207,6 +208,11 @@ impl Phantom {
         } else {
             Vec::new()
         };
+        let look = if options.vary_look {
+            crate::synth::look::Look::drawn(options.seed)
+        } else {
+            crate::synth::look::Look::PLAIN
+        };
         Self {
             background: background_sheet(&mut rng),
             calibrated: options.cameras.as_ref().is_some_and(|c| !c.is_empty()),
@@ -222,6 +228,7 @@ impl Phantom {
             fields,
             tools,
             zoom_range,
+            look,
         }
     }
 

@@ -196,6 +196,7 @@ impl Phantom {
     ) -> RgbImage {
         let (w, h) = (cam.width as usize, cam.height as usize);
         let light = self.lights[m];
+        let look = self.look;
         let eye = cam.extrinsics.center_mm();
         let noise = self.options.noise;
         let smoke = if self.options.smoke {
@@ -226,7 +227,7 @@ impl Phantom {
                             v[f[0] as usize] * b0 + v[f[1] as usize] * b1 + v[f[2] as usize] * b2
                         };
                         let p = lerp3(&d.posed);
-                        let tex = lerp3(&d.texture_coords);
+                        let tex = lerp3(&d.texture_coords) / look.texture_scale;
                         let mut n = lerp3(&d.normals).normalize_or(DVec3::NEG_Z);
                         let v = (eye - p).normalize_or(DVec3::NEG_Z);
                         if n.dot(v) < 0.0 {
@@ -248,7 +249,21 @@ impl Phantom {
                             );
                             n = (n + bump * 0.25).normalize_or(n);
                         }
-                        let (albedo, ks, shininess) = albedo(material, tex);
+                        let (mut albedo, ks, shininess) = albedo(material, tex);
+                        match material {
+                            Material::Kidney => albedo *= look.kidney_tint,
+                            // Blood-like patches on the surrounding tissue: close to the
+                            // kidney's colour.
+                            Material::Fat if look.blood > 0.0 => {
+                                let patch = ((fbm(tex / 14.0, 3, 55) as f32 + 0.5
+                                    - (1.0 - look.blood))
+                                    * 4.0)
+                                    .clamp(0.0, 1.0);
+                                albedo = albedo.lerp(Vec3::new(0.42, 0.07, 0.06), patch);
+                            }
+                            _ => {}
+                        }
+                        let ks = ks * look.specular;
                         let to_light = light - p;
                         let dist = to_light.length().max(1.0);
                         let l = to_light / dist;
@@ -258,6 +273,8 @@ impl Phantom {
                         let falloff = (KIDNEY_DEPTH_MM / dist).powi(2).min(2.0);
                         (albedo * (0.10 + 0.95 * diffuse as f32) + Vec3::splat(spec as f32))
                             * falloff as f32
+                            * look.gain
+                            * look.light_rgb
                     };
                     let r2 = ((x as f64 - cam.intrinsics.cx).powi(2)
                         + (y as f64 - cam.intrinsics.cy).powi(2))
@@ -286,7 +303,12 @@ impl Phantom {
                 row
             })
             .collect();
-        RgbImage::from_raw(w as u32, h as u32, rows.concat()).unwrap_or_default()
+        let image = RgbImage::from_raw(w as u32, h as u32, rows.concat()).unwrap_or_default();
+        if look.blur_px > 0.05 {
+            image::imageops::blur(&image, look.blur_px)
+        } else {
+            image
+        }
     }
 }
 
