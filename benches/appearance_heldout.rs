@@ -202,8 +202,27 @@ fn dice(forest: &Forest, frame: &Frame, fv: &[FeatureVector], unpainted: bool) -
     }
 }
 
+/// The forest's settings: the defaults, or APPEARANCE_FOREST_DEPTH / _LEAF / _TREES / _SEED to explore.
+fn forest_params() -> ForestParams {
+    let var = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<usize>().ok());
+    let mut p = ForestParams::default();
+    if let Some(d) = var("APPEARANCE_FOREST_DEPTH") {
+        p.max_depth = d;
+    }
+    if let Some(l) = var("APPEARANCE_FOREST_LEAF") {
+        p.min_samples_leaf = l;
+    }
+    if let Some(t) = var("APPEARANCE_FOREST_TREES") {
+        p.trees = t;
+    }
+    if let Some(s) = var("APPEARANCE_FOREST_SEED") {
+        p.seed = s as u64;
+    }
+    p
+}
+
 fn train(s: &Samples) -> Forest {
-    Forest::train(s, 2, &ForestParams::default())
+    Forest::train(s, 2, &forest_params())
         .expect("strokes give samples")
         .0
 }
@@ -322,7 +341,7 @@ fn widened_phantom(seed: u64, width: u32, height: u32, dir: Option<&Path>) -> Ve
     })
     .expect("a phantom");
     let classes = ClassMap::from_scene(&scene);
-    let model = Appearance::train(&scene, &ForestParams::default(), None).expect("seeds");
+    let model = Appearance::train(&scene, &forest_params(), None).expect("seeds");
     let (mut inter, mut sizes) = (vec![0usize; classes.len()], vec![0usize; classes.len()]);
     let mut test_x: Vec<u8> = Vec::new();
     let mut test_y: Vec<u8> = Vec::new();

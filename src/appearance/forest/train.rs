@@ -289,7 +289,14 @@ impl TreeBuilder<'_> {
         let mut attempts = 0;
         let mut left = vec![0f64; k];
         let mut right = vec![0f64; k];
-        while attempts < self.mtry.max(1) {
+        // As scikit-learn: past `mtry` features, keep drawing until one splits the node (with
+        // 72 features, many are flat inside a small node; stopping there left the small tumour
+        // class in leaves too early: tumour Dice 0.90 against scikit-learn's 0.96 on a widened
+        // phantom).
+        let improves = |best: &Option<(f64, usize, u8)>| {
+            best.is_some_and(|(s, _, _)| s < parent_impurity - 1e-9)
+        };
+        while attempts < self.allowed.len() && (attempts < self.mtry.max(1) || !improves(&best)) {
             let f = self.allowed[self.rng.below(self.allowed.len())];
             if tried[f] {
                 continue;
