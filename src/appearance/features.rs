@@ -105,6 +105,30 @@ fn table<T: Copy + Default>(pool: &crate::pool::Pool<T>, stride: usize, rows: us
     buf
 }
 
+/// The ((w+1)×(h+1)) summed-area table of `value` over a w × h image of channels.
+fn summed_area<T>(
+    pool: &crate::pool::Pool<T>,
+    base: &[[u8; CHANNELS]],
+    w: usize,
+    h: usize,
+    value: impl Fn(&[u8; CHANNELS]) -> T,
+) -> Vec<T>
+where
+    T: Copy + Default + std::ops::Add<Output = T>,
+{
+    let stride = w + 1;
+    let mut t = table(pool, stride, h + 1);
+    for y in 0..h {
+        let mut row = T::default();
+        for x in 0..w {
+            row = row + value(&base[y * w + x]);
+            let (o, up) = ((y + 1) * stride + x + 1, y * stride + x + 1);
+            t[o] = t[up] + row;
+        }
+    }
+    t
+}
+
 impl Drop for FrameFeatures {
     fn drop(&mut self) {
         TABLES_U32.give(std::mem::take(&mut self.integrals));
@@ -172,38 +196,14 @@ impl FrameFeatures {
             .with_min_len(4096)
             .map(|p| base_channels(p[0], p[1], p[2]))
             .collect();
-        let stride = w + 1;
-        // One table per channel (and per bank channel's squares), filled in parallel.
+        // One table per channel, and of each bank channel's squares, filled in parallel.
         let sums: Vec<Vec<u32>> = (0..CHANNELS)
             .into_par_iter()
-            .map(|c| {
-                let mut t = table(&TABLES_U32, stride, h + 1);
-                for y in 0..h {
-                    let mut row = 0u32;
-                    for x in 0..w {
-                        row += base[y * w + x][c] as u32;
-                        let (o, up) = ((y + 1) * stride + x + 1, y * stride + x + 1);
-                        t[o] = t[up] + row;
-                    }
-                }
-                t
-            })
+            .map(|c| summed_area(&TABLES_U32, &base, w, h, |px| px[c] as u32))
             .collect();
         let squares: Vec<Vec<u64>> = (0..BANK_CHANNELS)
             .into_par_iter()
-            .map(|c| {
-                let mut t = table(&TABLES_U64, stride, h + 1);
-                for y in 0..h {
-                    let mut row = 0u64;
-                    for x in 0..w {
-                        let v = base[y * w + x][c] as u64;
-                        row += v * v;
-                        let (o, up) = ((y + 1) * stride + x + 1, y * stride + x + 1);
-                        t[o] = t[up] + row;
-                    }
-                }
-                t
-            })
+            .map(|c| summed_area(&TABLES_U64, &base, w, h, |px| (px[c] as u64).pow(2)))
             .collect();
         Self {
             offset,
