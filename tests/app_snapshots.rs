@@ -142,6 +142,30 @@ fn paint_train_track_scrub_and_review_the_demo() {
     move_to(&mut h, pos2(5.0, SIZE[1] - 5.0));
     shoot(&mut h, "app_probability_view");
 
+    // U: the uncertainty view points to where a stroke would teach the forest most (the
+    // unpainted patch of highest uncertainty), when the forest hesitates anywhere.
+    h.key_press(Key::U);
+    h.run_steps(3);
+    assert_eq!(h.state().view.layer, Layer::Uncertainty);
+    let frame = h.state().view.frame;
+    let hints: Vec<_> = (0..2)
+        .map(|c| {
+            let m = &h.state().jobs.probabilities[&frame][c];
+            endofuse::appearance::hint::next_stroke(
+                &m.uncertainty(),
+                h.state().doc.editor.layer(c, frame),
+                (m.width / 30).max(16),
+            )
+        })
+        .collect();
+    eprintln!("stroke hints: {hints:?}");
+    for hint in hints.iter().flatten() {
+        assert!(hint.uncertainty >= endofuse::appearance::hint::HINT_MIN_UNCERTAINTY);
+    }
+    shoot(&mut h, "app_uncertainty_hint");
+    h.key_press(Key::P);
+    h.run_steps(2);
+
     // Track frames 0–5 in the worker; results stream in and the view follows.
     h.key_press(Key::I);
     h.state_mut().view.track_range = (0, 5);

@@ -4,6 +4,7 @@
 
 pub mod features;
 pub mod forest;
+pub mod hint;
 pub mod validate;
 
 pub use features::{FEATURE_COUNT, FrameFeatures};

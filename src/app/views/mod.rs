@@ -147,6 +147,30 @@ pub fn views(shown: &Shown, screen: &mut Screen, ui: &mut egui::Ui) {
             Color32::from_gray(230),
         );
         scale::draw(shown, &painter, rect);
+        if let Some(hint) = textures::stroke_hint(shown, screen, c) {
+            // Where a stroke would teach the forest most: a dashed ring and a word.
+            let centre = transform.to_screen(rect, cam_size, pos2(hint.x, hint.y));
+            let r = hint.radius * transform.scale(rect, cam_size);
+            let ring = egui::Shape::dashed_line(
+                &(0..=48)
+                    .map(|i| {
+                        let a = i as f32 / 48.0 * std::f32::consts::TAU;
+                        centre + r * vec2(a.cos(), a.sin())
+                    })
+                    .collect::<Vec<_>>(),
+                Stroke::new(2.0, Color32::from_rgb(120, 220, 255)),
+                6.0,
+                4.0,
+            );
+            painter.extend(ring);
+            painter.text(
+                centre + vec2(0.0, r + 4.0),
+                egui::Align2::CENTER_TOP,
+                format!("paint here next? (uncertainty {:.2})", hint.uncertainty),
+                egui::FontId::proportional(12.0),
+                Color32::from_rgb(120, 220, 255),
+            );
+        }
         let fitted = shown.doc.results.get(&view.frame);
         if fitted.is_none() && shown.doc.placement.is_some() {
             // The model drawn here is where it was placed, not a fit of this frame.

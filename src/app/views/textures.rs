@@ -5,6 +5,7 @@
 use super::Screen;
 use crate::app::state::Layer;
 use crate::app::{EndofuseApp, Shown};
+use crate::appearance::hint::StrokeHint;
 use crate::scene::SEED_NONE;
 use egui::{ColorImage, TextureHandle, TextureOptions};
 
@@ -18,6 +19,8 @@ pub struct Textures {
     probability: Vec<Option<TextureHandle>>,
     pub probability_key: Option<(usize, Layer)>,
     pub(super) overlay_cpu: Vec<Option<(usize, TextureHandle)>>,
+    /// Per camera: where the next stroke helps most, for (frame, seed revision).
+    hints: Vec<Option<((usize, u64), Option<StrokeHint>)>>,
 }
 
 impl Textures {
@@ -102,6 +105,31 @@ pub(super) fn seeds_texture(
     Some(tex)
 }
 
+/// In the uncertainty view: the unpainted patch where the forest hesitates most (recomputed
+/// when the frame, the maps or the strokes change).
+pub(super) fn stroke_hint(shown: &Shown, screen: &mut Screen, c: usize) -> Option<StrokeHint> {
+    let frame = shown.view.frame;
+    if shown.view.layer != Layer::Uncertainty {
+        return None;
+    }
+    let maps = shown.jobs.probabilities.get(&frame)?;
+    let key = (frame, shown.doc.editor.revision);
+    if let Some((k, hint)) = slot(&mut screen.textures.hints, c)
+        && *k == key
+    {
+        return *hint;
+    }
+    let m = maps.get(c)?;
+    let cell = (m.width / 30).max(16);
+    let hint = crate::appearance::hint::next_stroke(
+        &m.uncertainty(),
+        shown.doc.editor.layer(c, frame),
+        cell,
+    );
+    *slot(&mut screen.textures.hints, c) = Some((key, hint));
+    hint
+}
+
 /// Probability of the chosen class (in its colour) or uncertainty (dark → bright orange).
 pub(super) fn probability_texture(
     shown: &Shown,
@@ -118,6 +146,7 @@ pub(super) fn probability_texture(
     let textures = &mut screen.textures;
     if textures.probability_key != Some(key) {
         textures.probability.clear();
+        textures.hints.clear();
         textures.probability_key = Some(key);
     }
     if let Some(tex) = slot(&mut textures.probability, c) {
