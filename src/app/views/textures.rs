@@ -9,6 +9,9 @@ use crate::appearance::hint::StrokeHint;
 use crate::scene::SEED_NONE;
 use egui::{ColorImage, TextureHandle, TextureOptions};
 
+/// A view's stroke hint and the (frame, seed revision) it was found for.
+type CachedHint = ((usize, u64), Option<StrokeHint>);
+
 /// The textures and what each shows.
 #[derive(Default)]
 pub struct Textures {
@@ -20,7 +23,7 @@ pub struct Textures {
     pub probability_key: Option<(usize, Layer)>,
     pub(super) overlay_cpu: Vec<Option<(usize, TextureHandle)>>,
     /// Per camera: where the next stroke helps most, for (frame, seed revision).
-    hints: Vec<Option<((usize, u64), Option<StrokeHint>)>>,
+    hints: Vec<Option<CachedHint>>,
 }
 
 impl Textures {
