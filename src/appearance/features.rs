@@ -67,10 +67,11 @@ pub struct FrameFeatures {
     height: usize,
     /// Per pixel: L*, a*, b*, nr, ng (u8).
     base: Vec<[u8; CHANNELS]>,
-    /// Integral images ((w+1)×(h+1)) of each channel.
-    integrals: Vec<Vec<u32>>,
-    /// Integral images of the bank channels' squares, for the local deviation.
-    squares: Vec<Vec<u64>>,
+    /// Integral image ((w+1)×(h+1)) of every channel, interleaved: one window's corners give
+    /// all channels' sums in four reads.
+    integrals: Vec<[u32; CHANNELS]>,
+    /// Integral image of the bank channels' squares (interleaved), for the local deviation.
+    squares: Vec<[u64; BANK_CHANNELS]>,
     radii: [usize; SCALES],
     /// Where this (possibly cropped) image sits in the full frame, and the full frame's size.
     offset: (usize, usize),
@@ -91,8 +92,8 @@ pub fn reach_for_level(level: usize) -> usize {
 /// Recycled summed-area tables: the fit builds features over a fresh region of every frame.
 /// Only a table's first row and column are cleared: [`FrameFeatures::build`] writes every other
 /// entry before reading it.
-static TABLES_U32: crate::pool::Pool<u32> = crate::pool::Pool::new();
-static TABLES_U64: crate::pool::Pool<u64> = crate::pool::Pool::new();
+static TABLES_SUMS: crate::pool::Pool<[u32; CHANNELS]> = crate::pool::Pool::new();
+static TABLES_SQUARES: crate::pool::Pool<[u64; BANK_CHANNELS]> = crate::pool::Pool::new();
 
 /// A (`rows` × `stride`) summed-area table from `pool`, first row and column zero.
 fn table<T: Copy + Default>(pool: &crate::pool::Pool<T>, stride: usize, rows: usize) -> Vec<T> {
@@ -105,25 +106,31 @@ fn table<T: Copy + Default>(pool: &crate::pool::Pool<T>, stride: usize, rows: us
     buf
 }
 
-/// The ((w+1)×(h+1)) summed-area table of `value` over a w × h image of channels.
-fn summed_area<T>(
-    pool: &crate::pool::Pool<T>,
+/// The ((w+1)×(h+1)) summed-area table of `value(pixel)` (N values per pixel, interleaved).
+fn summed_area<T, const N: usize>(
+    pool: &crate::pool::Pool<[T; N]>,
     base: &[[u8; CHANNELS]],
     w: usize,
     h: usize,
-    value: impl Fn(&[u8; CHANNELS]) -> T,
-) -> Vec<T>
+    value: impl Fn(&[u8; CHANNELS], usize) -> T,
+) -> Vec<[T; N]>
 where
     T: Copy + Default + std::ops::Add<Output = T>,
+    [T; N]: Default,
 {
     let stride = w + 1;
     let mut t = table(pool, stride, h + 1);
     for y in 0..h {
-        let mut row = T::default();
+        let mut row = [T::default(); N];
         for x in 0..w {
-            row = row + value(&base[y * w + x]);
+            let px = &base[y * w + x];
             let (o, up) = ((y + 1) * stride + x + 1, y * stride + x + 1);
-            t[o] = t[up] + row;
+            let above = t[up];
+            let cell = &mut t[o];
+            for c in 0..N {
+                row[c] = row[c] + value(px, c);
+                cell[c] = above[c] + row[c];
+            }
         }
     }
     t
@@ -131,8 +138,8 @@ where
 
 impl Drop for FrameFeatures {
     fn drop(&mut self) {
-        TABLES_U32.give(std::mem::take(&mut self.integrals));
-        TABLES_U64.give(std::mem::take(&mut self.squares));
+        TABLES_SUMS.give([std::mem::take(&mut self.integrals)]);
+        TABLES_SQUARES.give([std::mem::take(&mut self.squares)]);
     }
 }
 
@@ -196,15 +203,11 @@ impl FrameFeatures {
             .with_min_len(4096)
             .map(|p| base_channels(p[0], p[1], p[2]))
             .collect();
-        // One table per channel, and of each bank channel's squares, filled in parallel.
-        let sums: Vec<Vec<u32>> = (0..CHANNELS)
-            .into_par_iter()
-            .map(|c| summed_area(&TABLES_U32, &base, w, h, |px| px[c] as u32))
-            .collect();
-        let squares: Vec<Vec<u64>> = (0..BANK_CHANNELS)
-            .into_par_iter()
-            .map(|c| summed_area(&TABLES_U64, &base, w, h, |px| (px[c] as u64).pow(2)))
-            .collect();
+        // The channels' table and their squares' table, filled in parallel.
+        let (sums, squares) = rayon::join(
+            || summed_area(&TABLES_SUMS, &base, w, h, |px, c| px[c] as u32),
+            || summed_area(&TABLES_SQUARES, &base, w, h, |px, c| (px[c] as u64).pow(2)),
+        );
         Self {
             offset,
             full,
@@ -225,47 +228,56 @@ impl FrameFeatures {
         self.height
     }
 
-    /// Mean of channel `c` over the window of radius `r` around (x, y), clipped to the image.
+    /// Every channel's mean over the window of radius `r` around (x, y), clipped to the image.
     #[inline]
-    fn mean(&self, c: usize, x: usize, y: usize, r: usize) -> f32 {
-        let (sum, area) = box_sum(&self.integrals[c], self.width, self.height, x, y, r);
-        sum as f32 / area as f32
+    fn means(&self, x: usize, y: usize, r: usize) -> ([f32; CHANNELS], u32) {
+        let (sums, area) = box_sums(&self.integrals, self.width, self.height, x, y, r);
+        (sums.map(|s| s as f32 / area as f32), area)
     }
 
     /// The feature vector of pixel (x, y).
     pub fn at(&self, x: usize, y: usize) -> FeatureVector {
         let (w, h) = (self.width, self.height);
+        let q = |v: f32| (v.clamp(0.0, 255.0) + 0.5) as u8;
+        // Per scale, all channels at once: means, deviations and gradients.
+        let mut mean = [[0f32; CHANNELS]; SCALES];
+        let mut std = [[0u8; BANK_CHANNELS]; SCALES];
+        let mut grad = [[0u8; BANK_CHANNELS]; SCALES];
+        for (i, &r) in self.radii.iter().enumerate() {
+            let (m, area) = self.means(x, y, r);
+            mean[i] = m;
+            let (sq, _) = box_sums(&self.squares, w, h, x, y, r);
+            // Haar gradient at this scale: the window a radius ahead minus the one a radius
+            // behind, across and down.
+            let (right, _) = self.means((x + r).min(w - 1), y, r);
+            let (left, _) = self.means(x.saturating_sub(r), y, r);
+            let (down, _) = self.means(x, (y + r).min(h - 1), r);
+            let (up, _) = self.means(x, y.saturating_sub(r), r);
+            for c in 0..BANK_CHANNELS {
+                let var = (sq[c] as f64 / area as f64 - (m[c] as f64).powi(2)).max(0.0);
+                std[i][c] = q(3.0 * var.sqrt() as f32);
+                let (gx, gy) = (right[c] - left[c], down[c] - up[c]);
+                grad[i][c] = q(2.0 * (gx * gx + gy * gy).sqrt());
+            }
+        }
         let mut f = [0u8; FEATURE_COUNT];
         let px = &self.base[y * w + x];
-        let q = |v: f32| (v.clamp(0.0, 255.0) + 0.5) as u8;
         let mut o = 0;
         for (c, &value) in px.iter().enumerate() {
             f[o] = value;
             o += 1;
-            let mut means = [0f32; SCALES];
-            for (i, &r) in self.radii.iter().enumerate() {
-                let (sum, area) = box_sum(&self.integrals[c], w, h, x, y, r);
-                let mean = sum as f32 / area as f32;
-                means[i] = mean;
-                f[o] = q(mean);
+            for i in 0..SCALES {
+                f[o] = q(mean[i][c]);
                 o += 1;
                 if c < BANK_CHANNELS {
-                    let (sq, _) = box_sum64(&self.squares[c], w, h, x, y, r);
-                    let var = (sq as f64 / area as f64 - (mean as f64).powi(2)).max(0.0);
-                    f[o] = q(3.0 * var.sqrt() as f32);
-                    // Haar gradient at this scale: the window a radius ahead minus the one a
-                    // radius behind, across and down.
-                    let gx = self.mean(c, (x + r).min(w - 1), y, r)
-                        - self.mean(c, x.saturating_sub(r), y, r);
-                    let gy = self.mean(c, x, (y + r).min(h - 1), r)
-                        - self.mean(c, x, y.saturating_sub(r), r);
-                    f[o + 1] = q(2.0 * (gx * gx + gy * gy).sqrt());
+                    f[o] = std[i][c];
+                    f[o + 1] = grad[i][c];
                     o += 2;
                 }
             }
             if c < BANK_CHANNELS {
                 for i in 0..SCALES - 1 {
-                    f[o] = q(128.0 + 2.0 * (means[i] - means[i + 1]));
+                    f[o] = q(128.0 + 2.0 * (mean[i][c] - mean[i + 1][c]));
                     o += 1;
                 }
             }
@@ -290,15 +302,15 @@ impl FrameFeatures {
     fn row_means(&self, c: usize, yc: usize, r: usize, out: &mut [f32]) {
         let (w, h) = (self.width, self.height);
         let s = w + 1;
-        let t = &self.integrals[c];
+        let t = &self.integrals;
         let (y0, y1) = (yc.saturating_sub(r), (yc + r + 1).min(h));
         let (top, bottom) = (&t[y0 * s..y0 * s + s], &t[y1 * s..y1 * s + s]);
         for (x, m) in out.iter_mut().enumerate() {
             let (x0, x1) = (x.saturating_sub(r), (x + r + 1).min(w));
-            let sum = bottom[x1]
-                .wrapping_sub(top[x1])
-                .wrapping_sub(bottom[x0])
-                .wrapping_add(top[x0]);
+            let sum = bottom[x1][c]
+                .wrapping_sub(top[x1][c])
+                .wrapping_sub(bottom[x0][c])
+                .wrapping_add(top[x0][c]);
             *m = sum as f32 / ((x1 - x0) * (y1 - y0)) as f32;
         }
     }
@@ -325,13 +337,13 @@ impl FrameFeatures {
                     continue;
                 }
                 let (y0, y1) = (y.saturating_sub(r), (y + r + 1).min(h));
-                let sq = &self.squares[c];
+                let sq = &self.squares;
                 let (top, bottom) = (&sq[y0 * s..y0 * s + s], &sq[y1 * s..y1 * s + s]);
                 self.row_means(c, y.saturating_sub(r), r, &mut sc.up);
                 self.row_means(c, (y + r).min(h - 1), r, &mut sc.down);
                 for (x, f) in out.iter_mut().enumerate() {
                     let (x0, x1) = (x.saturating_sub(r), (x + r + 1).min(w));
-                    let sum2 = bottom[x1] + top[x0] - top[x1] - bottom[x0];
+                    let sum2 = bottom[x1][c] + top[x0][c] - top[x1][c] - bottom[x0][c];
                     let area = ((x1 - x0) * (y1 - y0)) as u64;
                     let mean = means[x];
                     let var = (sum2 as f64 / area as f64 - (mean as f64).powi(2)).max(0.0);
@@ -471,24 +483,54 @@ fn window(w: usize, h: usize, x: usize, y: usize, r: usize) -> (usize, usize, us
     )
 }
 
-/// Sum and pixel count of the window of radius r around (x, y), clipped to the image.
+/// Every channel's sum over the window of radius r around (x, y), clipped to the image, and
+/// the window's pixel count. Sums wrap (u32 tables of a huge frame): the difference is exact.
 #[inline]
-fn box_sum(table: &[u32], w: usize, h: usize, x: usize, y: usize, r: usize) -> (u32, u32) {
+fn box_sums<T, const N: usize>(
+    table: &[[T; N]],
+    w: usize,
+    h: usize,
+    x: usize,
+    y: usize,
+    r: usize,
+) -> ([T; N], u32)
+where
+    T: Copy + WrappingArith,
+{
     let (x0, y0, x1, y1) = window(w, h, x, y, r);
     let s = w + 1;
-    let sum = table[y1 * s + x1]
-        .wrapping_sub(table[y0 * s + x1])
-        .wrapping_sub(table[y1 * s + x0])
-        .wrapping_add(table[y0 * s + x0]);
-    (sum, ((x1 - x0) * (y1 - y0)) as u32)
+    let (a, b, c, d) = (
+        &table[y1 * s + x1],
+        &table[y0 * s + x1],
+        &table[y1 * s + x0],
+        &table[y0 * s + x0],
+    );
+    let sums = std::array::from_fn(|k| a[k].wsub(b[k]).wsub(c[k]).wadd(d[k]));
+    (sums, ((x1 - x0) * (y1 - y0)) as u32)
 }
 
-#[inline]
-fn box_sum64(table: &[u64], w: usize, h: usize, x: usize, y: usize, r: usize) -> (u64, u64) {
-    let (x0, y0, x1, y1) = window(w, h, x, y, r);
-    let s = w + 1;
-    let sum = table[y1 * s + x1] + table[y0 * s + x0] - table[y0 * s + x1] - table[y1 * s + x0];
-    (sum, ((x1 - x0) * (y1 - y0)) as u64)
+/// Wrapping add and subtract, for the summed-area tables' element types.
+trait WrappingArith {
+    fn wadd(self, o: Self) -> Self;
+    fn wsub(self, o: Self) -> Self;
+}
+
+impl WrappingArith for u32 {
+    fn wadd(self, o: Self) -> Self {
+        self.wrapping_add(o)
+    }
+    fn wsub(self, o: Self) -> Self {
+        self.wrapping_sub(o)
+    }
+}
+
+impl WrappingArith for u64 {
+    fn wadd(self, o: Self) -> Self {
+        self.wrapping_add(o)
+    }
+    fn wsub(self, o: Self) -> Self {
+        self.wrapping_sub(o)
+    }
 }
 
 /// Halves a frame by 2×2 averaging (one pyramid level).
