@@ -126,19 +126,26 @@ impl EndofuseApp {
         self.doc.editor.revision = self.jobs.seeds_sent + 1;
     }
 
+    /// Uses a forest the app holds (a loaded session): the worker gets it too.
     pub(super) fn use_forest(&mut self, forest: Arc<crate::appearance::Appearance>) {
         self.send_job(Command::SetAppearance(Some(forest.clone())));
-        self.doc.appearance = Some(forest);
-        self.doc.touch();
+        self.forest_changed(Some(forest));
     }
 
-    /// No forest (a session restored from before training): its maps go with it.
+    /// No forest (a session restored from before training).
     pub(super) fn drop_forest(&mut self) {
         self.send_job(Command::SetAppearance(None));
-        self.doc.appearance = None;
-        self.jobs.probabilities.clear();
-        self.view.layer = super::state::Layer::Image;
+        self.forest_changed(None);
+        self.view.layer = Layer::Image;
+    }
+
+    /// The forest is another one (trained, loaded or dropped): the maps of the one before go.
+    fn forest_changed(&mut self, forest: Option<Arc<crate::appearance::Appearance>>) {
+        self.doc.appearance = forest;
         self.doc.touch();
+        self.jobs.probabilities.clear();
+        self.jobs.probability_asked = None;
+        self.screen.textures.probability_key = None;
     }
 
     /// Seeds for the worker, if they changed since it last had them.
@@ -317,11 +324,7 @@ impl EndofuseApp {
                     "Forest trained on {} pixels in {:.2} s{check}.",
                     a.stats.samples, a.stats.train_s
                 ));
-                self.doc.appearance = Some(a);
-                self.doc.touch();
-                self.jobs.probabilities.clear();
-                self.jobs.probability_asked = None;
-                self.screen.textures.probability_key = None;
+                self.forest_changed(Some(a));
                 if self.view.layer == Layer::Image {
                     self.view.layer = Layer::Probability(self.view.class);
                 }
