@@ -9,31 +9,39 @@ use endofuse::app::actions::Action;
 use endofuse::app::commands::AppCommand;
 use endofuse::app::confirm::Confirm;
 use endofuse::app::pickers::FileRequest;
-use endofuse::app::{EndofuseApp, NoDialogs, UnavailableDialogs};
-use std::path::Path;
+use endofuse::app::{Dialogs, EndofuseApp, NoDialogs, UnavailableDialogs};
+use std::path::{Path, PathBuf};
 
 mod common;
 
 use common::app::{shoot, step_until};
 
-fn harness() -> Harness<'static, EndofuseApp> {
+/// The demo at 1180×700 with `dialogs`, its autosaves in `autosaves`; `setup` adjusts the app.
+fn harness(
+    dialogs: Box<dyn Dialogs>,
+    autosaves: PathBuf,
+    setup: impl FnOnce(&mut EndofuseApp) + 'static,
+) -> Harness<'static, EndofuseApp> {
     Harness::builder()
         .with_size([1180.0, 700.0])
         .with_accessibility_check(false)
         .wgpu()
-        .build_eframe(|cc| {
-            let mut app = EndofuseApp::new(cc, "demo", Box::new(NoDialogs));
-            app.files.autosave_dir = Some(
-                Path::new(env!("CARGO_TARGET_TMPDIR"))
-                    .join(format!("endofuse-app-safety-{}", std::process::id())),
-            );
+        .build_eframe(move |cc| {
+            let mut app = EndofuseApp::new(cc, "demo", dialogs);
+            app.files.autosave_dir = Some(autosaves);
+            setup(&mut app);
             app
         })
 }
 
 #[test]
 fn unsaved_work_is_asked_about_and_help_lists_every_action() {
-    let mut h = harness();
+    let mut h = harness(
+        Box::new(NoDialogs),
+        Path::new(env!("CARGO_TARGET_TMPDIR"))
+            .join(format!("endofuse-app-safety-{}", std::process::id())),
+        |_| {},
+    );
     step_until(&mut h, "the demo to load", |a| a.doc.scene.is_some());
     assert_eq!(
         h.state().doc.settings.mode,
@@ -104,16 +112,12 @@ fn file_actions_fall_back_to_the_built_in_browser() {
     let dir = std::env::temp_dir().join("endofuse-app-browser");
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
-    let mut h = Harness::builder()
-        .with_size([1180.0, 700.0])
-        .with_accessibility_check(false)
-        .wgpu()
-        .build_eframe(|cc| {
-            let mut app = EndofuseApp::new(cc, "demo", Box::new(UnavailableDialogs));
-            app.files.autosave_dir = Some(dir.join("autosaves"));
-            app.files.last_folder = Some(dir.clone());
-            app
-        });
+    let folder = dir.clone();
+    let mut h = harness(
+        Box::new(UnavailableDialogs),
+        dir.join("autosaves"),
+        move |app| app.files.last_folder = Some(folder),
+    );
     step_until(&mut h, "the demo to load", |a| a.doc.scene.is_some());
     let mut settings = h.state().doc.settings.clone();
     settings.trees = 29;

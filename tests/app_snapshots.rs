@@ -154,7 +154,6 @@ fn paint_train_track_scrub_and_review_the_demo() {
             endofuse::appearance::hint::next_stroke(
                 &m.uncertainty(),
                 h.state().doc.editor.layer(c, frame),
-                (m.width / 30).max(16),
             )
         })
         .collect();

@@ -20,15 +20,16 @@ pub struct StrokeHint {
 /// Below this mean uncertainty no cell is worth a stroke.
 pub const HINT_MIN_UNCERTAINTY: f32 = 0.35;
 
-/// The unpainted `cell`-px cell of highest mean uncertainty, if it reaches
+/// The side of a cell (px) of a `width`-wide image: a thirtieth of it, at least 16 px.
+pub fn cell_px(width: usize) -> usize {
+    (width / 30).max(16)
+}
+
+/// The unpainted cell ([`cell_px`]) of highest mean uncertainty, if it reaches
 /// [`HINT_MIN_UNCERTAINTY`]. `seeds` (same size, when given) marks painted pixels.
-pub fn next_stroke(
-    uncertainty: &Plane<f32>,
-    seeds: Option<&LabelImage>,
-    cell: usize,
-) -> Option<StrokeHint> {
+pub fn next_stroke(uncertainty: &Plane<f32>, seeds: Option<&LabelImage>) -> Option<StrokeHint> {
     let (w, h) = (uncertainty.width, uncertainty.height);
-    let cell = cell.max(2);
+    let cell = cell_px(w);
     let painted = |x: usize, y: usize| {
         seeds.is_some_and(|s| s.width == w && s.height == h && *s.get(x, y) != SEED_NONE)
     };
@@ -86,11 +87,11 @@ mod tests {
         }
         let mut seeds = Plane::filled(64, 48, SEED_NONE);
         seeds.set(40, 20, 2);
-        let hint = next_stroke(&u, Some(&seeds), 16).expect("a hint");
+        let hint = next_stroke(&u, Some(&seeds)).expect("a hint");
         assert_eq!((hint.x, hint.y, hint.radius), (8.0, 24.0, 8.0));
         assert!((hint.uncertainty - 0.6).abs() < 1e-6);
         // Unpainted, the stronger patch wins; a sure forest gives no hint.
-        assert_eq!(next_stroke(&u, None, 16).unwrap().x, 40.0);
-        assert!(next_stroke(&Plane::filled(64, 48, 0.2), None, 16).is_none());
+        assert_eq!(next_stroke(&u, None).unwrap().x, 40.0);
+        assert!(next_stroke(&Plane::filled(64, 48, 0.2), None).is_none());
     }
 }

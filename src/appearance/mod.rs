@@ -179,10 +179,7 @@ impl Appearance {
         let (forest, mut stats) = Forest::train(&samples, classes.len(), params)
             .map_err(|e| InputError::new(seeds_origin(scene), e.to_string()))?;
         let validation =
-            validate::held_out(&samples, &groups.ids, classes.len(), params).map(|mut v| {
-                v.left_out = groups.by.to_string();
-                v
-            });
+            validate::held_out(&samples, &groups.ids, groups.by, classes.len(), params);
         // Report what the user waits for: reading seeded frames, features and the forest.
         stats.train_s = started.elapsed().as_secs_f64();
         Ok(Appearance {

@@ -29,12 +29,13 @@ pub struct Validation {
     pub left_out: String,
 }
 
-/// Leave-one-group-out agreement of `samples` (group per sample, see
-/// `collect_grouped`); None with fewer than two groups, or when no fold can train (a class
+/// Leave-one-group-out agreement of `samples` (group per sample, see `collect_grouped`; a
+/// group is a `left_out`: "frame" or "view"); None with fewer than two groups, or when no fold can train (a class
 /// painted in one frame only is skipped in the folds that lack it).
 pub fn held_out(
     samples: &Samples,
     groups: &[u32],
+    left_out: &str,
     classes: usize,
     params: &ForestParams,
 ) -> Option<Validation> {
@@ -98,7 +99,7 @@ pub fn held_out(
         worst_class_accuracy,
         worst_class,
         folds: trained,
-        left_out: String::new(),
+        left_out: left_out.to_string(),
     })
 }
 
@@ -134,7 +135,7 @@ mod tests {
             allowed_features: vec![0, 1],
             ..ForestParams::default()
         };
-        let v = held_out(&s, &groups, 2, &params).expect("three groups");
+        let v = held_out(&s, &groups, "frame", 2, &params).expect("three groups");
         assert_eq!(v.folds, 3);
         assert!(
             (0.25..0.8).contains(&v.balanced_accuracy),
@@ -151,9 +152,9 @@ mod tests {
                 same.classes[i] = 1 - same.classes[i];
             }
         }
-        let v = held_out(&same, &consistent, 2, &params).unwrap();
+        let v = held_out(&same, &consistent, "frame", 2, &params).unwrap();
         assert!(v.balanced_accuracy > 0.95, "{}", v.balanced_accuracy);
         // One group: no figure.
-        assert!(held_out(&s, &vec![0; s.len()], 2, &params).is_none());
+        assert!(held_out(&s, &vec![0; s.len()], "frame", 2, &params).is_none());
     }
 }

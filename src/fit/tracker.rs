@@ -344,25 +344,32 @@ impl<'a> FrameTracker<'a> {
     /// Without camera correction: did this frame's apparent size change as in a zoom (the
     /// depth then took the zoom's place)? Against the frame just before only, as in LSC.
     fn size_changes_like_a_zoom(&mut self, t: usize, fit: &FrameFit) -> bool {
+        self.centre_after_good_frame(t).is_some_and(|centre| {
+            self.depth_zoom
+                .changes_like_a_zoom(&self.good, &fit.state, centre)
+        })
+    }
+
+    /// The model's centre at the last good shape, when frame `t` follows that good frame
+    /// directly: a change of apparent size means something only against the frame just
+    /// before (after lost frames the organ may simply be elsewhere).
+    fn centre_after_good_frame(&self, t: usize) -> Option<glam::DVec3> {
         if self.first || self.good_frame + 1 != t {
-            return false;
+            return None;
         }
         let model = self.ctx.model;
-        let centre = self.ctx.model_centre(&model.deformed(&self.good.shape));
-        self.depth_zoom
-            .changes_like_a_zoom(&self.good, &fit.state, centre)
+        Some(self.ctx.model_centre(&model.deformed(&self.good.shape)))
     }
 
     /// A zoom the scene does not mark (LSC): the frame's apparent size jumped with the
     /// intrinsics fixed. Only against the frame just before: after lost frames the organ may
     /// simply be elsewhere, and a lost stretch must not turn into a change of intrinsics.
     fn zoom_starts(&mut self, t: usize, fit: &FrameFit) -> bool {
-        if self.first || self.good_frame + 1 != t || self.is_lost(fit) {
+        if self.is_lost(fit) {
             return false;
         }
-        let model = self.ctx.model;
-        let centre = self.ctx.model_centre(&model.deformed(&self.good.shape));
-        self.zoom.fires(&self.good, &fit.state, centre)
+        self.centre_after_good_frame(t)
+            .is_some_and(|centre| self.zoom.fires(&self.good, &fit.state, centre))
     }
 
     /// After `reinit_after_lost` lost frames in a row the organ may be back somewhere else:

@@ -171,26 +171,25 @@ pub fn views(shown: &Shown, screen: &mut Screen, ui: &mut egui::Ui) {
                 Color32::from_rgb(120, 220, 255),
             );
         }
-        let fitted = shown.doc.results.get(&view.frame);
-        if fitted.is_none() && shown.doc.placement.is_some() {
-            // The model drawn here is where it was placed, not a fit of this frame.
-            painter.text(
-                rect.right_top() + vec2(-6.0, 4.0),
-                egui::Align2::RIGHT_TOP,
+        // What the model drawn here is, when it is not this frame's fit.
+        let banner = match shown.doc.results.get(&view.frame) {
+            None if shown.doc.placement.is_some() => Some((
                 "NOT FITTED: showing the placed pose",
-                egui::FontId::proportional(13.0),
                 Color32::from_rgb(255, 190, 70),
-            );
-        }
-        if let Some(r) = fitted
-            && r.lost
-        {
+            )),
+            Some(r) if r.lost => Some((
+                "LOST: holding the last good pose",
+                Color32::from_rgb(255, 90, 90),
+            )),
+            _ => None,
+        };
+        if let Some((text, colour)) = banner {
             painter.text(
                 rect.right_top() + vec2(-6.0, 4.0),
                 egui::Align2::RIGHT_TOP,
-                "LOST: holding the last good pose",
+                text,
                 egui::FontId::proportional(13.0),
-                Color32::from_rgb(255, 90, 90),
+                colour,
             );
         }
         let view_rect = ViewRect {

@@ -123,12 +123,8 @@ pub(super) fn stroke_hint(shown: &Shown, screen: &mut Screen, c: usize) -> Optio
         return *hint;
     }
     let m = maps.get(c)?;
-    let cell = (m.width / 30).max(16);
-    let hint = crate::appearance::hint::next_stroke(
-        &m.uncertainty(),
-        shown.doc.editor.layer(c, frame),
-        cell,
-    );
+    let hint =
+        crate::appearance::hint::next_stroke(&m.uncertainty(), shown.doc.editor.layer(c, frame));
     *slot(&mut screen.textures.hints, c) = Some((key, hint));
     hint
 }
