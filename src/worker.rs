@@ -4,7 +4,7 @@
 //! frames and between Gauss–Newton steps; a panic inside a job becomes an error event and the
 //! worker keeps serving.
 
-use crate::appearance::{Appearance, ForestParams, ProbabilityMaps};
+use crate::appearance::{Appearance, ForestParams, ProbabilityMaps, SampleCache, TrainingSet};
 use crate::error::Error;
 use crate::fit::Model;
 use crate::fit::config::{FitConfig, Mode};
@@ -27,8 +27,12 @@ pub enum Command {
     /// Use a forest the UI already holds (a loaded session), or none (a session saved before
     /// training).
     SetAppearance(Option<Arc<Appearance>>),
+    /// Train the forest (its held-out figure follows on [`Command::Validate`]).
     Train(ForestParams),
-    /// Per-class probabilities of one frame in every view.
+    /// The held-out figure of the forest the last Train made ([`Event::Validated`]); sent after
+    /// the visible frame's maps are asked for, so the user sees them first.
+    Validate,
+    /// Per-class probabilities of one frame in every view: a coarse map first, then the full.
     Classify {
         frame: usize,
     },
@@ -69,10 +73,17 @@ pub enum Event {
         model: Arc<Model>,
     },
     Trained(Arc<Appearance>),
-    /// Probabilities of `frame`, one map per camera.
+    /// Probabilities of `frame`, one map per camera; `coarse`: the quick first map (classified
+    /// at half resolution), the full one follows.
     Probabilities {
         frame: usize,
         maps: Arc<Vec<ProbabilityMaps>>,
+        coarse: bool,
+    },
+    /// The forest `of` with its held-out figure: replaces `of` where it is still in use.
+    Validated {
+        of: Arc<Appearance>,
+        validated: Arc<Appearance>,
     },
     Initialised(Affine),
     Progress {
@@ -121,6 +132,10 @@ struct State {
     /// The model of the scene's structures (seeds change the scene, never its structures).
     model: Option<Arc<Model>>,
     appearance: Option<Arc<Appearance>>,
+    /// What the last Train learned from, with its parameters and forest, until validated.
+    training: Option<(TrainingSet, ForestParams, Arc<Appearance>)>,
+    /// The seeded images' samples of the scene in use (cleared with the scene).
+    samples: SampleCache,
     /// The fit's configuration for placing and tracking.
     config: FitConfig,
 }
@@ -140,6 +155,8 @@ impl Worker {
                     scene: None,
                     model: None,
                     appearance: None,
+                    training: None,
+                    samples: SampleCache::default(),
                     config: FitConfig::default(),
                 };
                 for (id, command) in inbox {
@@ -234,7 +251,7 @@ fn task_of(c: &Command) -> Task {
     match c {
         Command::LoadScene(_) | Command::UseScene(_) | Command::SetSeeds(_) => Task::Load,
         Command::Train(_) | Command::SetAppearance(_) => Task::Train,
-        Command::Classify { .. } => Task::Classify,
+        Command::Classify { .. } | Command::Validate => Task::Classify,
         Command::Initialise { .. } => Task::Initialise,
         Command::Track { .. } => Task::Track,
         Command::Export(_) | Command::Shutdown => Task::Export,
@@ -282,41 +299,74 @@ fn run(
             state.scene = Some(scene.clone());
             state.model = Some(model.clone());
             state.appearance = None;
+            state.training = None;
+            state.samples = SampleCache::default();
             emit(out, Event::SceneLoaded { scene, model })?;
         }
         Command::UseScene(scene) => {
             state.model = Some(Arc::new(Model::build(&scene)?));
             state.scene = Some(scene);
             state.appearance = None;
+            state.training = None;
+            state.samples = SampleCache::default();
         }
         Command::SetSeeds(seeds) => {
             let scene = need_scene(state)?;
             state.scene = Some(Arc::new(scene.with_seeds(seeds)));
         }
-        Command::SetAppearance(a) => state.appearance = a,
+        Command::SetAppearance(a) => {
+            state.appearance = a;
+            state.training = None;
+        }
         Command::Train(params) => {
             let scene = need_scene(state)?;
-            let model = Arc::new(Appearance::train(&scene, &params, Some(cancel))?);
+            let set = TrainingSet::collect(&scene, Some(cancel), Some(&state.samples))?;
+            let model = Arc::new(Appearance::fit(&set, &params)?);
             emit(out, Event::Trained(model.clone()))?;
-            state.appearance = Some(model);
+            state.appearance = Some(model.clone());
+            state.training = Some((set, params, model));
+        }
+        Command::Validate => {
+            // Only the forest in use, once: a later Train or a loaded forest replaced it.
+            if let Some((set, params, of)) = state.training.take()
+                && state
+                    .appearance
+                    .as_ref()
+                    .is_some_and(|a| Arc::ptr_eq(a, &of))
+            {
+                let validated = Arc::new(Appearance {
+                    validation: set.validate(&params),
+                    ..(*of).clone()
+                });
+                state.appearance = Some(validated.clone());
+                emit(out, Event::Validated { of, validated })?;
+            }
         }
         Command::Classify { frame } => {
             let scene = need_scene(state)?;
             let appearance = need_appearance(state)?;
-            let mut maps = Vec::new();
-            for c in 0..scene.cameras.len() {
-                if cancel.load(Ordering::SeqCst) {
-                    return Err(Error::Cancelled);
+            for coarse in [true, false] {
+                let mut maps = Vec::new();
+                for c in 0..scene.cameras.len() {
+                    if cancel.load(Ordering::SeqCst) {
+                        return Err(Error::Cancelled);
+                    }
+                    let image = scene.frame(c, frame)?;
+                    maps.push(if coarse {
+                        appearance.classify_coarse(&image)
+                    } else {
+                        appearance.classify_frame(&image)
+                    });
                 }
-                maps.push(appearance.classify_frame(&*scene.frame(c, frame)?));
+                emit(
+                    out,
+                    Event::Probabilities {
+                        frame,
+                        maps: Arc::new(maps),
+                        coarse,
+                    },
+                )?;
             }
-            emit(
-                out,
-                Event::Probabilities {
-                    frame,
-                    maps: Arc::new(maps),
-                },
-            )?;
         }
         Command::Initialise { frame } => {
             let scene = need_scene(state)?;
@@ -481,10 +531,43 @@ mod tests {
             ..ForestParams::default()
         }));
         let ev = until(&worker, |e| matches!(e, Event::Finished(Task::Train)));
-        assert!(
-            ev.iter()
-                .any(|e| matches!(e, Event::Trained(a) if a.stats.samples > 100))
-        );
+        let trained = ev
+            .iter()
+            .find_map(|e| match e {
+                Event::Trained(a) => Some(a.clone()),
+                _ => None,
+            })
+            .expect("a forest");
+        assert!(trained.stats.samples > 100);
+        assert!(trained.validation.is_none(), "the figure follows the maps");
+        // The visible frame's maps: a coarse one first, then the full one, both full-size.
+        worker.send(Command::Classify { frame: 3 });
+        let ev = until(&worker, |e| matches!(e, Event::Finished(Task::Classify)));
+        let maps: Vec<(bool, usize, usize)> = ev
+            .iter()
+            .filter_map(|e| match e {
+                Event::Probabilities { maps, coarse, .. } => {
+                    Some((*coarse, maps[0].width, maps[0].height))
+                }
+                _ => None,
+            })
+            .collect();
+        assert_eq!(maps, vec![(true, 240, 136), (false, 240, 136)]);
+        // Then the held-out figure, on the same forest.
+        worker.send(Command::Validate);
+        let ev = until(&worker, |e| matches!(e, Event::Finished(Task::Classify)));
+        let Some(Event::Validated { of, validated }) =
+            ev.iter().find(|e| matches!(e, Event::Validated { .. }))
+        else {
+            panic!("no held-out figure");
+        };
+        assert!(Arc::ptr_eq(of, &trained));
+        assert_eq!(validated.forest, trained.forest);
+        assert!(validated.validation.as_ref().unwrap().balanced_accuracy > 0.8);
+        // Once only: a second Validate has nothing left to check.
+        worker.send(Command::Validate);
+        let ev = until(&worker, |e| matches!(e, Event::Finished(Task::Classify)));
+        assert!(!ev.iter().any(|e| matches!(e, Event::Validated { .. })));
         worker.send(Command::Track {
             mode: Mode::LS,
             frames: (0, 3),

@@ -126,3 +126,56 @@ fn missing_seeds_are_refused_naming_the_class() {
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("--frames"));
 }
+
+/// The app's live loop reads again only the image a stroke changed: the cached collection must
+/// give exactly the samples a cold one gives, before and after the stroke, and the coarse first
+/// map must agree with the full one almost everywhere.
+#[test]
+fn the_live_loop_cache_and_coarse_map_match_a_cold_run() {
+    use endofuse::appearance::{Appearance, ForestParams, SampleCache, TrainingSet};
+    use endofuse::scene::SEED_BACKGROUND;
+    let scene = endofuse::synth::memory_scene(&endofuse::synth::SynthOptions {
+        frames: 4,
+        width: 240,
+        height: 136,
+        ..Default::default()
+    })
+    .unwrap();
+    let cache = SampleCache::default();
+    let before = TrainingSet::collect(&scene, None, None).unwrap();
+    let warm = TrainingSet::collect(&scene, None, Some(&cache)).unwrap();
+    assert_eq!(before.samples.features, warm.samples.features);
+    // A background stroke on frame 1 of the right view.
+    let mut seeds = scene.seeds.clone();
+    let s = seeds.by_camera[1].get_mut(&1).unwrap();
+    for x in 5..40 {
+        s.data[4 * s.width + x] = SEED_BACKGROUND;
+    }
+    let stroked = scene.with_seeds(seeds);
+    let cold = TrainingSet::collect(&stroked, None, None).unwrap();
+    let warm = TrainingSet::collect(&stroked, None, Some(&cache)).unwrap();
+    assert!(cold.samples.len() > before.samples.len(), "the stroke adds samples");
+    assert_eq!(cold.samples.features, warm.samples.features);
+    assert_eq!(cold.samples.classes, warm.samples.classes);
+
+    let a = Appearance::fit(
+        &warm,
+        &ForestParams {
+            trees: 8,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let frame = stroked.frame(0, 3).unwrap();
+    let (full, coarse) = (a.classify_frame(&frame), a.classify_coarse(&frame));
+    assert_eq!((coarse.width, coarse.height), (full.width, full.height));
+    let (lf, lc) = (
+        full.argmax_labels(&a.classes).data,
+        coarse.argmax_labels(&a.classes).data,
+    );
+    let agree = lf.iter().zip(&lc).filter(|(x, y)| x == y).count() as f64 / lf.len() as f64;
+    assert!(
+        agree > 0.9,
+        "coarse and full maps agree on {agree:.3} of the pixels"
+    );
+}

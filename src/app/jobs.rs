@@ -33,6 +33,9 @@ pub struct Jobs {
     /// Probability maps of recent frames, one per camera.
     pub probabilities: HashMap<usize, Arc<Vec<ProbabilityMaps>>>,
     probability_asked: Option<usize>,
+    /// A frame whose maps are shown until better ones come: the quick coarse map, or the
+    /// earlier forest's maps after a retrain (no blank flash on every live retrain).
+    probability_refresh: Option<usize>,
     /// Strokes changed at this time (s) and a live retrain is due.
     retrain_due_s: Option<f64>,
     /// The fit's configuration the worker tracks with (recorded in exports).
@@ -141,9 +144,19 @@ impl EndofuseApp {
 
     /// The forest is another one (trained, loaded or dropped): the maps of the one before go.
     fn forest_changed(&mut self, forest: Option<Arc<crate::appearance::Appearance>>) {
+        let frame = self.view.frame;
+        let keep = forest
+            .is_some()
+            .then(|| self.jobs.probabilities.remove(&frame))
+            .flatten();
         self.doc.appearance = forest;
         self.doc.touch();
         self.jobs.probabilities.clear();
+        self.jobs.probability_refresh = None;
+        if let Some(maps) = keep {
+            self.jobs.probabilities.insert(frame, maps);
+            self.jobs.probability_refresh = Some(frame);
+        }
         self.jobs.probability_asked = None;
         self.screen.textures.probability_key = None;
     }
@@ -183,7 +196,8 @@ impl EndofuseApp {
         let frame = self.view.frame;
         if self.doc.appearance.is_none()
             || self.view.layer == Layer::Image
-            || self.jobs.probabilities.contains_key(&frame)
+            || (self.jobs.probabilities.contains_key(&frame)
+                && self.jobs.probability_refresh != Some(frame))
             || self.jobs.probability_asked.is_some()
         {
             return;
@@ -192,9 +206,9 @@ impl EndofuseApp {
         self.send_job(Command::Classify { frame });
     }
 
-    /// True when the probability maps of frame `t` have arrived.
+    /// True when the full probability maps of frame `t` from the current forest have arrived.
     pub fn has_probabilities(&self, t: usize) -> bool {
-        self.jobs.probabilities.contains_key(&t)
+        self.jobs.probabilities.contains_key(&t) && self.jobs.probability_refresh != Some(t)
     }
 
     fn need_forest(&mut self) -> bool {
@@ -312,29 +326,64 @@ impl EndofuseApp {
                 self.scene_loaded(scene, model);
             }
             Event::Trained(a) => {
-                let check = match &a.validation {
-                    Some(v) => format!(
-                        "; with each seeded {} left out in turn, {:.0} % of its strokes are labelled right",
-                        v.left_out,
-                        100.0 * v.balanced_accuracy
-                    ),
-                    None => "; seed a second frame to check it on strokes it did not learn".into(),
-                };
                 self.status.notify(format!(
-                    "Forest trained on {} pixels in {:.2} s{check}.",
+                    "Forest trained on {} pixels in {:.2} s; checking it on strokes it did not learn…",
                     a.stats.samples, a.stats.train_s
                 ));
                 self.forest_changed(Some(a));
                 if self.view.layer == Layer::Image {
                     self.view.layer = Layer::Probability(self.view.class);
                 }
+                // The visible frame's maps first, the held-out figure after.
+                self.ask_probabilities();
+                self.send_job(Command::Validate);
             }
-            Event::Probabilities { frame, maps } => {
-                self.jobs.probability_asked = None;
+            Event::Validated { of, validated } => {
+                let current = self
+                    .doc
+                    .appearance
+                    .as_ref()
+                    .is_some_and(|a| Arc::ptr_eq(a, &of));
+                if current {
+                    let check = match &validated.validation {
+                        Some(v) => format!(
+                            "; with each seeded {} left out in turn, {:.0} % of its strokes are labelled right",
+                            v.left_out,
+                            100.0 * v.balanced_accuracy
+                        ),
+                        None => {
+                            "; seed a second frame to check it on strokes it did not learn".into()
+                        }
+                    };
+                    self.status.notify(format!(
+                        "Forest trained on {} pixels in {:.2} s{check}.",
+                        validated.stats.samples, validated.stats.train_s
+                    ));
+                    // The same forest: its maps stay.
+                    self.doc.appearance = Some(validated);
+                    self.doc.touch();
+                }
+            }
+            Event::Probabilities {
+                frame,
+                maps,
+                coarse,
+            } => {
+                if !coarse {
+                    self.jobs.probability_asked = None;
+                }
                 if self.jobs.probabilities.len() > 8 {
                     self.jobs.probabilities.clear();
                 }
                 self.jobs.probabilities.insert(frame, maps);
+                if coarse {
+                    self.jobs.probability_refresh = Some(frame);
+                } else if self.jobs.probability_refresh == Some(frame) {
+                    self.jobs.probability_refresh = None;
+                }
+                if frame == self.view.frame {
+                    self.screen.textures.probability_key = None;
+                }
             }
             Event::Initialised(a) => {
                 self.doc.placement = Some(a);
@@ -523,11 +572,14 @@ impl EndofuseApp {
             && self.jobs.seeds_sent != self.doc.editor.revision
             && !self.doc.editor.in_stroke()
         {
-            let due = *self.jobs.retrain_due_s.get_or_insert(now + 0.6);
+            // Retrain as soon as a stroke ends, as ilastik's live update does (the painting
+            // itself never waits: a stroke in progress holds the retrain).
+            let due = *self.jobs.retrain_due_s.get_or_insert(now + 0.05);
             if now >= due && self.status.busy.is_none() {
                 self.train();
             }
-            ctx.request_repaint_after(std::time::Duration::from_millis(200));
+            // Wake when it is due, not on the next input.
+            ctx.request_repaint_after(std::time::Duration::from_secs_f64((due - now).max(0.01)));
         }
         self.ask_probabilities();
         self.autosave(now);
