@@ -36,6 +36,8 @@ pub struct Jobs {
     /// A frame whose maps are shown until better ones come: the quick coarse map, or the
     /// earlier forest's maps after a retrain (no blank flash on every live retrain).
     probability_refresh: Option<usize>,
+    /// The forest in use awaits its held-out figure (Command::Validate sent).
+    pub validating: bool,
     /// Strokes changed at this time (s) and a live retrain is due.
     retrain_due_s: Option<f64>,
     /// The fit's configuration the worker tracks with (recorded in exports).
@@ -151,6 +153,7 @@ impl EndofuseApp {
             .flatten();
         self.doc.appearance = forest;
         self.doc.touch();
+        self.jobs.validating = false;
         self.jobs.probabilities.clear();
         self.jobs.probability_refresh = None;
         if let Some(maps) = keep {
@@ -337,6 +340,7 @@ impl EndofuseApp {
                 // The visible frame's maps first, the held-out figure after.
                 self.ask_probabilities();
                 self.send_job(Command::Validate);
+                self.jobs.validating = true;
             }
             Event::Validated { of, validated } => {
                 let current = self
@@ -362,6 +366,7 @@ impl EndofuseApp {
                     // The same forest: its maps stay.
                     self.doc.appearance = Some(validated);
                     self.doc.touch();
+                    self.jobs.validating = false;
                 }
             }
             Event::Probabilities {

@@ -141,6 +141,7 @@ fn side_contents(shown: &Shown, ui: &mut egui::Ui) {
                 100.0 * v.balanced_accuracy,
                 100.0 * v.worst_class_accuracy
             ),
+            None if shown.jobs.validating => "checking…".into(),
             None => "seed a 2nd frame to check".into(),
         };
         let colour = match &a.validation {
