@@ -242,3 +242,68 @@ fn paint_train_track_scrub_and_review_the_demo() {
     assert!(app.doc.scene.is_some());
     assert_eq!(app.doc.editor.counts(), strokes, "nothing painted was lost");
 }
+
+/// Live update as ilastik users know it: a stroke ends, the forest retrains on its own, the
+/// visible frame's map is never blank meanwhile (the earlier forest's, then a coarse one, then
+/// the full one), and the held-out figure follows.
+#[test]
+fn live_update_retrains_after_a_stroke_and_keeps_the_map_shown() {
+    let mut h = harness();
+    step_until(&mut h, "the demo to load", |a| a.doc.scene.is_some());
+    h.key_press(Key::T);
+    step_until(&mut h, "training, the maps and their check", |a| {
+        a.has_probabilities(a.view.frame)
+            && a.doc
+                .appearance
+                .as_ref()
+                .is_some_and(|f| f.validation.is_some())
+            && a.status.busy.is_none()
+    });
+    h.state_mut().doc.settings.live_update = true;
+    let before = h.state().doc.appearance.as_ref().unwrap().stats.samples;
+    // A background stroke above the kidney in the right view.
+    h.key_press(Key::Num1);
+    let v = h.state().screen.layout.views[1];
+    let (a, b) = (
+        pos2(v.center().x - 60.0, v.center().y - 60.0),
+        pos2(v.center().x + 60.0, v.center().y - 55.0),
+    );
+    move_to(&mut h, a);
+    press(&mut h, a, true);
+    for i in 1..=8 {
+        move_to(&mut h, a + (b - a) * (i as f32 / 8.0));
+    }
+    press(&mut h, b, false);
+    assert_eq!(h.state().doc.editor.undo_steps(), 1, "the stroke painted");
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(120);
+    loop {
+        let app = h.state();
+        let frame = app.view.frame;
+        assert!(
+            app.jobs.probabilities.contains_key(&frame),
+            "the visible frame's map went blank during the retrain"
+        );
+        let forest = app.doc.appearance.as_ref().unwrap();
+        if forest.stats.samples > before
+            && app.has_probabilities(frame)
+            && forest.validation.is_some()
+        {
+            break;
+        }
+        assert!(
+            std::time::Instant::now() < deadline,
+            "no live retrain: {} samples, maps {}, status {:?} {:?}",
+            forest.stats.samples,
+            app.has_probabilities(frame),
+            app.status.notice,
+            app.status.error
+        );
+        h.step();
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    assert_eq!(
+        h.state().doc.editor.undo_steps(),
+        1,
+        "the stroke is one undo step"
+    );
+}

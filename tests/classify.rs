@@ -154,7 +154,10 @@ fn the_live_loop_cache_and_coarse_map_match_a_cold_run() {
     let stroked = scene.with_seeds(seeds);
     let cold = TrainingSet::collect(&stroked, None, None).unwrap();
     let warm = TrainingSet::collect(&stroked, None, Some(&cache)).unwrap();
-    assert!(cold.samples.len() > before.samples.len(), "the stroke adds samples");
+    assert!(
+        cold.samples.len() > before.samples.len(),
+        "the stroke adds samples"
+    );
     assert_eq!(cold.samples.features, warm.samples.features);
     assert_eq!(cold.samples.classes, warm.samples.classes);
 
