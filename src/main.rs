@@ -111,6 +111,12 @@ enum Command {
         /// scale, blood-like patches beside the kidney, blur (a wider test of the classifier).
         #[arg(long)]
         vary_look: bool,
+        /// Draw the rig and motion from the seed as real da Vinci data vary: toe-in 1–2°, the
+        /// right principal point up to 2 px off, k2 and p1/p2, a 20 % zoom over 10–15 frames
+        /// (half the scenes zoom back out) with the principal point drifting ±4 px, depth
+        /// 145–165 mm, and an initial pose 8 mm and 10° off (a wider test of the fit).
+        #[arg(long)]
+        vary_rig: bool,
         /// Render these structures (an `import-ct` output, or kidney.obj + tumour_*.obj)
         /// instead of the built-in anatomy.
         #[arg(long)]
@@ -435,6 +441,7 @@ fn run(cli: Cli) -> Result<()> {
             no_zoom,
             no_smoke,
             vary_look,
+            vary_rig,
             meshes,
             calib,
         }) => {
@@ -472,6 +479,7 @@ fn run(cli: Cli) -> Result<()> {
                 zoom: !no_zoom,
                 smoke: !no_smoke,
                 vary_look,
+                vary_rig,
                 ..SynthOptions::default()
             };
             let started = std::time::Instant::now();

@@ -508,6 +508,7 @@ fn assemble(
         seeds: Some("seeds/{camera}/{frame:06}.png".into()),
         ground_truth: None,
         zoom_changes: Vec::new(),
+        k1_vs_focal: None,
     };
     let json = dir.join("scene.json");
     let text = serde_json::to_string_pretty(&file).unwrap_or_default();

@@ -15,6 +15,9 @@ pub struct FrameContext<'a> {
     pub cameras: &'a [crate::geometry::Camera],
     /// Forest class of each structure (None for hidden ones).
     pub class_of: Vec<Option<usize>>,
+    /// The lens's k1 against focal length (scene.json `k1_vs_focal`): where given, a camera
+    /// correction sets k1 from fx; where not, k1 stays as calibrated.
+    pub k1_vs_focal: Option<[f64; 3]>,
 }
 
 impl<'a> FrameContext<'a> {
@@ -36,11 +39,19 @@ impl<'a> FrameContext<'a> {
             model,
             cameras: &scene.cameras,
             class_of,
+            k1_vs_focal: scene.k1_vs_focal,
         }
     }
 }
 
 impl FrameContext<'_> {
+    /// k1 of camera `m` at focal length `fx` (px) by the scene's relation, if it gives one.
+    pub fn k1_at(&self, m: usize, fx: f64) -> Option<f64> {
+        let [c0, c1, c2] = self.k1_vs_focal?;
+        let inv = self.cameras.get(m)?.width as f64 / fx;
+        Some(c0 + c1 * inv + c2 * inv * inv)
+    }
+
     /// The structures with an image term (a forest class), in the order their render objects
     /// take in the visibility rasters: a raster's object id `o` is structure `imaged()[o]`.
     pub fn imaged(&self) -> Vec<usize> {

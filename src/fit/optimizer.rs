@@ -77,6 +77,20 @@ pub fn step(
             b: p.transpose() * &eq.b,
         };
     }
+    // k1 is no free parameter: silhouettes barely see it, and left free it mimicked focal
+    // changes (k1 −1.3 against +0.03 on a zoom in and out, issue 14). It follows fx by the
+    // scene's relation, or stays as calibrated; its row and column go, so the other
+    // intrinsics are solved for without it.
+    let holds_k1 = matches!(block, Block::Cameras(_));
+    if holds_k1 {
+        let size = eq.size();
+        for j in 0..size {
+            eq.h[(K1, j)] = 0.0;
+            eq.h[(j, K1)] = 0.0;
+        }
+        eq.h[(K1, K1)] = 1.0;
+        eq.b[K1] = 0.0;
+    }
     let b_data = eq.b.clone();
     let size = eq.size();
     let max_diag = (0..size)
@@ -105,15 +119,26 @@ pub fn step(
         if delta.iter().any(|v| !v.is_finite()) {
             return None;
         }
+        let mut delta = delta.clone();
+        if holds_k1 {
+            delta[K1] = 0.0;
+        }
         let full = match &rig {
             Some(p) => p * delta,
-            None => delta.clone(),
+            None => delta,
         };
         let mut scale = 1.0;
         for _ in 0..tries {
             let scaled: Vec<f64> = full.iter().map(|d| d * scale).collect();
             let mut next = apply_increment(state, block, &scaled, centre);
             ctx.model.shape.pca.clamp_weights(&mut next.shape);
+            if holds_k1 {
+                for (m, intr) in next.intrinsics.iter_mut().enumerate() {
+                    if let Some(k1) = ctx.k1_at(m, intr.fx) {
+                        intr.k1 = k1;
+                    }
+                }
+            }
             if objective(&next) < before {
                 return Some(next);
             }
@@ -215,6 +240,9 @@ fn add_priors<'a>(
         }
     }
 }
+
+/// Index of k1 among a camera block's shared parameters (fx, fy, cx, cy, k1).
+const K1: usize = 4;
 
 /// ∂(all cameras' intrinsics)/∂(shared increment): 5·cameras × 5, each camera's five
 /// parameters moving by the rig's one increment.

@@ -110,6 +110,8 @@ pub struct Scene {
     pub ground_truth: GroundTruth,
     /// Inclusive frame ranges where the zoom changes.
     pub zoom_changes: Vec<(usize, usize)>,
+    /// k1 = c₀ + c₁/f + c₂/f², f = fx / width, where the scene gives the lens's relation.
+    pub k1_vs_focal: Option<[f64; 3]>,
     /// Shared with copies made by [`Scene::with_seeds`].
     cache: Arc<FrameCache>,
 }
@@ -247,6 +249,13 @@ impl Scene {
             }
             zoom_changes.push((a as usize, b as usize));
         }
+        if let Some(c) = file.k1_vs_focal
+            && c.iter().any(|v| !v.is_finite() || v.abs() > 1e3)
+        {
+            return Err(bad(format!(
+                "k1_vs_focal: {c:?} must be three finite coefficients (k1 = c0 + c1/f + c2/f², f = fx / width)"
+            )));
+        }
         let mut scene = Scene {
             root: Some(root.to_path_buf()),
             origin: json_path.display().to_string(),
@@ -260,6 +269,7 @@ impl Scene {
             seeds_template: None,
             ground_truth: GroundTruth::default(),
             zoom_changes,
+            k1_vs_focal: file.k1_vs_focal,
             cache: Arc::new(FrameCache::new(frames::DEFAULT_CACHE_FRAMES)),
         };
         scene.check_frame_headers()?;
@@ -305,6 +315,7 @@ impl Scene {
             seeds_template: None,
             ground_truth,
             zoom_changes,
+            k1_vs_focal: None,
             cache: Arc::new(FrameCache::new(1)),
         }
     }
@@ -325,6 +336,7 @@ impl Scene {
             seeds_template: self.seeds_template.clone(),
             ground_truth: self.ground_truth.clone(),
             zoom_changes: self.zoom_changes.clone(),
+            k1_vs_focal: self.k1_vs_focal,
             cache: self.cache.clone(),
         }
     }

@@ -52,6 +52,11 @@ pub struct SynthOptions {
     /// Draw the look (light colour and strength, glints, kidney tint, texture scale, blood-like
     /// patches, blur) from the seed instead of the default phantom's ([`look::Look`]).
     pub vary_look: bool,
+    /// Draw the rig and the scene from the seed as real da Vinci data vary (issue 14): toe-in
+    /// of 1–2° (±0.15° about the other axes), the right principal point up to 2 px off, k2 and
+    /// p1/p2, a 20 % zoom over 10–15 frames (half the scenes zoom back out) with the principal
+    /// point drifting ±4 px, depth 145–165 mm, a start 8 mm and 10° off ([`phantom::RigDraw`]).
+    pub vary_rig: bool,
 }
 
 impl Default for SynthOptions {
@@ -72,6 +77,7 @@ impl Default for SynthOptions {
             structures: None,
             cameras: None,
             vary_look: false,
+            vary_rig: false,
         }
     }
 }
@@ -215,10 +221,7 @@ pub fn write_scene(
             })
             .collect(),
         initial_pose: Some(InitialPoseEntry {
-            affine: phantom
-                .perturbed_initial_pose(options.initial_offset_mm, options.initial_offset_deg)
-                .q
-                .to_vec(),
+            affine: phantom.initial_pose().q.to_vec(),
         }),
         seeds: Some("seeds/{camera}/{frame:06}.png".into()),
         ground_truth: Some(GroundTruthEntry {
@@ -227,9 +230,11 @@ pub fn write_scene(
             hidden: None,
         }),
         zoom_changes: phantom
-            .zoom_range
-            .map(|(a, b)| vec![[a as i64, b as i64]])
-            .unwrap_or_default(),
+            .zoom_ranges
+            .iter()
+            .map(|&(a, b)| [a as i64, b as i64])
+            .collect(),
+        k1_vs_focal: phantom.k1_vs_focal(),
     };
     write_json_atomic(&dir.join("scene.json"), &file)
 }
@@ -298,17 +303,19 @@ pub fn memory_scene(options: &SynthOptions) -> Result<Scene, InputError> {
         }),
         memory_labels: Some(Arc::new(labels)),
     };
-    Ok(Scene::in_memory(
+    let mut scene = Scene::in_memory(
         "demo",
         30.0,
         cams0,
         frames,
         structures,
-        Some(phantom.perturbed_initial_pose(options.initial_offset_mm, options.initial_offset_deg)),
+        Some(phantom.initial_pose()),
         seeds,
         ground_truth,
-        phantom.zoom_range.into_iter().collect(),
-    ))
+        phantom.zoom_ranges.clone(),
+    );
+    scene.k1_vs_focal = phantom.k1_vs_focal();
+    Ok(scene)
 }
 
 /// The built-in demo scene.

@@ -31,7 +31,58 @@ const ZOOM_FACTOR: f64 = 1.2;
 /// (f = fx / width): k1 = −0.037 at f = 1.05, +0.012 at f = 1.26.
 pub fn k1_for_focal(fx_px: f64, width_px: f64) -> f64 {
     let inv = width_px / fx_px;
-    0.226 - 0.0719 * inv - 0.214 * inv * inv
+    let [c0, c1, c2] = K1_VS_FOCAL;
+    c0 + c1 * inv + c2 * inv * inv
+}
+
+/// The coefficients of [`k1_for_focal`] in 1/f.
+pub const K1_VS_FOCAL: [f64; 3] = [0.226, -0.0719, -0.214];
+
+/// What `SynthOptions::vary_rig` draws from the seed (its own random stream: the plain phantom
+/// is unchanged): the variations of real da Vinci data the fit must carry over to (issue 14).
+#[derive(Debug, Clone, PartialEq)]
+pub struct RigDraw {
+    /// Kidney depth, mm.
+    pub depth_mm: f64,
+    /// The right camera's toe-in about y, and its small turns about x and z (degrees).
+    pub toe_in_deg: [f64; 3],
+    /// The right principal point's offset from the left's (px).
+    pub right_pp_px: [f64; 2],
+    /// Per camera: k2, p1, p2.
+    pub distortion: Vec<[f64; 3]>,
+    /// Principal point drift at full zoom (px at 960 wide).
+    pub pp_drift_px: [f64; 2],
+    /// Frames the zoom takes, and whether it goes back out after.
+    pub zoom_frames: usize,
+    pub zoom_back: bool,
+}
+
+impl RigDraw {
+    pub fn drawn(seed: u64, views: usize) -> Self {
+        let mut rng = Rng::fork(seed, 0x0716_0014);
+        let sign = |rng: &mut Rng| if rng.below(2) == 0 { -1.0 } else { 1.0 };
+        Self {
+            depth_mm: rng.range(145.0, 165.0),
+            toe_in_deg: [
+                rng.range(1.0, 2.0),
+                rng.range(-0.15, 0.15),
+                rng.range(-0.15, 0.15),
+            ],
+            right_pp_px: [rng.range(-2.0, 2.0), rng.range(-1.0, 1.0)],
+            distortion: (0..views)
+                .map(|_| {
+                    [
+                        rng.range(-0.01, 0.01),
+                        rng.range(-3e-4, 3e-4),
+                        rng.range(-3e-4, 3e-4),
+                    ]
+                })
+                .collect(),
+            pp_drift_px: [sign(&mut rng) * rng.range(1.0, 4.0), rng.range(-4.0, 4.0)],
+            zoom_frames: 10 + rng.below(6),
+            zoom_back: rng.below(2) == 0,
+        }
+    }
 }
 
 /// A surgical instrument: a shaft from outside the view to a tip sweeping over the kidney.
@@ -63,8 +114,10 @@ pub struct Phantom {
     fields: Vec<(DeformationField, f64, f64)>,
     tools: Vec<Tool>,
     background: Mesh,
-    pub zoom_range: Option<(usize, usize)>,
+    /// Frame ranges of zoom changes: in, and (when the rig draw says so) back out.
+    pub zoom_ranges: Vec<(usize, usize)>,
     look: crate::synth::look::Look,
+    pub rig: Option<RigDraw>,
 }
 
 impl Phantom {
@@ -86,7 +139,11 @@ impl Phantom {
             k1: k1_for_focal(f, w),
             ..Intrinsics::pinhole(f, f, (w - 1.0) * 0.5, (h - 1.0) * 0.5)
         };
-        let target = DVec3::new(0.0, 0.0, KIDNEY_DEPTH_MM);
+        let rig = options
+            .vary_rig
+            .then(|| RigDraw::drawn(options.seed, options.views.max(1)));
+        let depth_mm = rig.as_ref().map_or(KIDNEY_DEPTH_MM, |r| r.depth_mm);
+        let target = DVec3::new(0.0, 0.0, depth_mm);
         let mut rest_cameras = Vec::new();
         let mut lights = Vec::new();
         for m in 0..options.views.max(1) {
@@ -121,13 +178,31 @@ impl Phantom {
                     )
                 }
             };
-            rest_cameras.push(Camera {
+            let mut camera = Camera {
                 name,
                 width: options.width,
                 height: options.height,
                 intrinsics: intr,
                 extrinsics,
-            });
+            };
+            if let Some(r) = &rig {
+                let i = &mut camera.intrinsics;
+                [i.k2, i.p1, i.p2] = r.distortion[m];
+                if m == 1 {
+                    // Toe-in: the right camera turned towards the left one's axis, converging
+                    // near the organ; its principal point a little off the left's.
+                    let [y, x, z] = r.toe_in_deg.map(f64::to_radians);
+                    let turn = rotation_from_vector(DVec3::Y * y)
+                        * rotation_from_vector(DVec3::X * x)
+                        * rotation_from_vector(DVec3::Z * z);
+                    let centre = camera.extrinsics.center_mm();
+                    camera.extrinsics.rotation = turn;
+                    camera.extrinsics.translation_mm = -(turn * centre);
+                    i.cx += r.right_pp_px[0];
+                    i.cy += r.right_pp_px[1];
+                }
+            }
+            rest_cameras.push(camera);
             lights.push(light);
         }
         if let Some(given) = options.cameras.clone().filter(|c| !c.is_empty()) {
@@ -173,12 +248,24 @@ impl Phantom {
             })
             .collect();
         let frames = options.frames;
-        let zoom_range = (options.zoom && frames >= 8).then(|| {
-            (
+        let zoom_ranges = match &rig {
+            _ if !options.zoom || frames < 8 => Vec::new(),
+            None => vec![(
                 (frames as f64 * 0.4).round() as usize,
                 ((frames as f64 * 0.7).round() as usize).min(frames - 1),
-            )
-        });
+            )],
+            Some(r) => {
+                let a = (frames as f64 * 0.3).round() as usize;
+                let b = (a + r.zoom_frames).min(frames - 1);
+                let mut v = vec![(a, b)];
+                // Back out after a short hold, where the video is long enough.
+                let (c, d) = (b + 4, b + 4 + r.zoom_frames);
+                if r.zoom_back && d < frames {
+                    v.push((c, d));
+                }
+                v
+            }
+        };
         let tools = if options.tools {
             (0..2)
                 .map(|i| {
@@ -214,7 +301,7 @@ impl Phantom {
             crate::synth::look::Look::PLAIN
         };
         Self {
-            background: background_sheet(&mut rng),
+            background: background_sheet(&mut rng, depth_mm),
             calibrated: options.cameras.as_ref().is_some_and(|c| !c.is_empty()),
             mesh_to_model,
             options,
@@ -227,8 +314,9 @@ impl Phantom {
             wobble_axis: rng.unit_vector(),
             fields,
             tools,
-            zoom_range,
+            zoom_ranges,
             look,
+            rig,
         }
     }
 
@@ -284,15 +372,19 @@ impl Phantom {
             .collect()
     }
 
-    /// Zoom progress in [0, 1] at frame t (smoothstep across the zoom range).
+    /// Zoom progress in [0, 1] at frame t: smoothstep up across the first zoom range, down
+    /// across the second (a zoom back out).
     fn zoom(&self, t: usize) -> f64 {
-        match self.zoom_range {
-            Some((a, b)) if b > a => {
-                let u = ((t as f64 - a as f64) / (b - a) as f64).clamp(0.0, 1.0);
-                u * u * (3.0 - 2.0 * u)
+        let ramp = |&(a, b): &(usize, usize)| {
+            if b <= a {
+                return 0.0;
             }
-            _ => 0.0,
-        }
+            let u = ((t as f64 - a as f64) / (b - a) as f64).clamp(0.0, 1.0);
+            u * u * (3.0 - 2.0 * u)
+        };
+        let mut ranges = self.zoom_ranges.iter();
+        let up = ranges.next().map_or(0.0, ramp);
+        up - ranges.next().map_or(0.0, ramp)
     }
 
     /// Cameras at frame t: focal length and principal point follow the zoom, k1 the polynomial.
@@ -306,8 +398,9 @@ impl Phantom {
                 let i = &mut c.intrinsics;
                 i.fx *= 1.0 + (ZOOM_FACTOR - 1.0) * z;
                 i.fy *= 1.0 + (ZOOM_FACTOR - 1.0) * z;
-                i.cx += 10.0 * scale * z;
-                i.cy -= 6.0 * scale * z;
+                let drift = self.rig.as_ref().map_or([10.0, -6.0], |r| r.pp_drift_px);
+                i.cx += drift[0] * scale * z;
+                i.cy += drift[1] * scale * z;
                 if !self.calibrated {
                     i.k1 = k1_for_focal(i.fx, c.width as f64);
                 }
@@ -325,6 +418,23 @@ impl Phantom {
 
     pub fn initial_cameras(&self) -> Vec<Camera> {
         self.cameras(0)
+    }
+
+    /// The lens's k1-vs-focal relation the phantom renders with (the paper's polynomial), as
+    /// scene.json's `k1_vs_focal`; none for a real calibration's rig (its k1 stays as measured).
+    pub fn k1_vs_focal(&self) -> Option<[f64; 3]> {
+        (!self.calibrated).then_some(K1_VS_FOCAL)
+    }
+
+    /// The scene's initial pose: the truth at frame 0 perturbed as the options say (8 mm and
+    /// 10° with `vary_rig`, the independent scenes' start).
+    pub fn initial_pose(&self) -> Affine {
+        let (mm, degrees) = if self.options.vary_rig {
+            (8.0, 10.0)
+        } else {
+            (self.options.initial_offset_mm, self.options.initial_offset_deg)
+        };
+        self.perturbed_initial_pose(mm, degrees)
     }
 
     /// The truth at frame 0 perturbed by `mm` millimetres and `degrees` about a random axis.
@@ -367,7 +477,7 @@ fn facing_transform(given: &[(String, u8, bool, Mesh)]) -> Affine {
 }
 
 /// The retroperitoneal backdrop: a wide bumpy sheet 40–60 mm behind the kidney.
-fn background_sheet(rng: &mut Rng) -> Mesh {
+fn background_sheet(rng: &mut Rng, depth_mm: f64) -> Mesh {
     let n = 48;
     let half = 420.0;
     let tilt = DVec2::new(rng.range(-0.15, 0.15), rng.range(-0.15, 0.15));
@@ -381,7 +491,7 @@ fn background_sheet(rng: &mut Rng) -> Mesh {
             verts.push(DVec3::new(
                 x,
                 y,
-                KIDNEY_DEPTH_MM + 50.0 + tilt.x * x + tilt.y * y + bump,
+                depth_mm + 50.0 + tilt.x * x + tilt.y * y + bump,
             ));
         }
     }
