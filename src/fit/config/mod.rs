@@ -119,8 +119,12 @@ pub struct PriorConfig {
     /// Tikhonov weight of the intrinsics towards the previous frame's.
     pub camera_damping: f64,
     /// The camera damping of each corrected intrinsic (fx, fy, cx, cy, k1) relative to its own
-    /// curvature: k1 held far harder, since zoom barely moves distortion (paper §IV-A) and a
-    /// free k1 mimics a focal change.
+    /// curvature. The principal point is held where calibration put it (10⁶): silhouettes
+    /// cannot tell a shift of both principal points from the organ sliding sideways, and left
+    /// free (1) it wandered 8–15 px off on widened phantoms whose true drift was under 4 px
+    /// (issue 14; on the project's own seed 7 it followed a 10 px drift within 4 px — lower
+    /// these to estimate it). k1 is never free (`optimizer`: it follows fx by the scene's
+    /// `k1_vs_focal`, or stays as calibrated); its entry is kept for old configurations.
     pub camera_relative: [f64; 5],
 }
 
@@ -132,7 +136,7 @@ impl Default for PriorConfig {
             shape: 2.0,
             shape_damping: 0.0,
             camera_damping: 1.0,
-            camera_relative: [1.0, 1.0, 1.0, 1.0, 100.0],
+            camera_relative: [1.0, 1.0, 1e6, 1e6, 100.0],
         }
     }
 }
