@@ -282,6 +282,18 @@ fn run(cli: Cli) -> Result<()> {
                 frames.as_deref().or(recorded_frames.as_deref()),
                 scene.frame_count,
             )?;
+            if mode == endofuse::fit::Mode::LSC {
+                // Silhouettes barely see k1 or the principal point: say what the correction
+                // does with them.
+                let k1 = if scene.k1_vs_focal.is_some() {
+                    "k1 follows fx by the scene's k1_vs_focal"
+                } else {
+                    "k1 held at calibration (the scene gives no k1_vs_focal)"
+                };
+                eprintln!(
+                    "track: camera correction estimates fx and fy; {k1}; the principal point held at calibration"
+                );
+            }
             let m =
                 endofuse::track::run(&scene, &out, mode, range, &config, None, &progress("track"))?;
             if let Some(r) = endofuse::fit::profile::report(m.frames) {
@@ -323,10 +335,12 @@ fn run(cli: Cli) -> Result<()> {
             }
             if let Some(c) = &m.camera {
                 eprintln!(
-                    "track: fx error {:.2} % (max {:.2} %), cx error {:.2} px",
+                    "track: fx error {:.2} % (max {:.2} %), cx error {:.2} px, cy error {:.2} px, k1 error max {:.3}",
                     100.0 * c.fx_rel_error_mean,
                     100.0 * c.fx_rel_error_max,
-                    c.cx_error_px_mean
+                    c.cx_error_px_mean,
+                    c.cy_error_px_mean,
+                    c.k1_error_max
                 );
             }
             Ok(())

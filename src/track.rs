@@ -37,6 +37,8 @@ pub struct CameraMetrics {
     pub fx_rel_error_mean: f64,
     pub cx_error_px_mean: f64,
     pub fx_rel_error_max: f64,
+    pub cy_error_px_mean: f64,
+    pub k1_error_max: f64,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -192,6 +194,8 @@ pub struct Recorder<'a> {
     centroid_err: BTreeMap<String, Vec<f64>>,
     fx_err: Vec<f64>,
     cx_err: Vec<f64>,
+    cy_err: Vec<f64>,
+    k1_err: Vec<f64>,
     ms: Vec<f64>,
     lost_frames: usize,
     depth_zoom_frames: usize,
@@ -219,6 +223,8 @@ impl<'a> Recorder<'a> {
             centroid_err: BTreeMap::new(),
             fx_err: Vec::new(),
             cx_err: Vec::new(),
+            cy_err: Vec::new(),
+            k1_err: Vec::new(),
             ms: Vec::new(),
             lost_frames: 0,
             depth_zoom_frames: 0,
@@ -308,6 +314,8 @@ impl<'a> Recorder<'a> {
             for (est, tru) in f.state.intrinsics.iter().zip(&truth.cameras) {
                 self.fx_err.push((est.fx - tru.fx).abs() / tru.fx);
                 self.cx_err.push((est.cx - tru.cx).abs());
+                self.cy_err.push((est.cy - tru.cy).abs());
+                self.k1_err.push((est.k1 - tru.k1).abs());
             }
         }
         self.ms.push(f.ms);
@@ -380,6 +388,8 @@ impl<'a> Recorder<'a> {
                 fx_rel_error_mean: mean(&self.fx_err),
                 cx_error_px_mean: mean(&self.cx_err),
                 fx_rel_error_max: self.fx_err.iter().cloned().fold(0.0, f64::max),
+                cy_error_px_mean: mean(&self.cy_err),
+                k1_error_max: self.k1_err.iter().cloned().fold(0.0, f64::max),
             }),
             timing: Timing {
                 forest_train_s,

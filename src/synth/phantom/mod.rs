@@ -432,7 +432,10 @@ impl Phantom {
         let (mm, degrees) = if self.options.vary_rig {
             (8.0, 10.0)
         } else {
-            (self.options.initial_offset_mm, self.options.initial_offset_deg)
+            (
+                self.options.initial_offset_mm,
+                self.options.initial_offset_deg,
+            )
         };
         self.perturbed_initial_pose(mm, degrees)
     }
