@@ -290,9 +290,12 @@ fn run(cli: Cli) -> Result<()> {
                 } else {
                     "k1 held at calibration (the scene gives no k1_vs_focal)"
                 };
-                eprintln!(
-                    "track: camera correction estimates fx and fy; {k1}; the principal point held at calibration"
-                );
+                let pp = if config.priors.camera_relative[2..4].iter().all(|&r| r >= 1e3) {
+                    "the principal point held at calibration"
+                } else {
+                    "the principal point estimated (the configuration frees it)"
+                };
+                eprintln!("track: camera correction estimates fx and fy; {k1}; {pp}");
             }
             let m =
                 endofuse::track::run(&scene, &out, mode, range, &config, None, &progress("track"))?;
