@@ -101,6 +101,7 @@ pub fn export_results(
             confidence: r.confidence,
             lost: r.lost,
             depth_explains_zoom: r.depth_explains_zoom,
+            refused: Vec::new(),
             labels: rendered.labels,
             hidden: rendered.hidden,
             centroids: rendered.centroids,

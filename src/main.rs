@@ -290,12 +290,15 @@ fn run(cli: Cli) -> Result<()> {
                 } else {
                     "k1 held at calibration (the scene gives no k1_vs_focal)"
                 };
-                let pp = if config.priors.camera_relative[2..4].iter().all(|&r| r >= 1e3) {
+                let pp = if config.priors.camera_relative[2..4]
+                    .iter()
+                    .all(|&r| r >= 1e3)
+                {
                     "the principal point held at calibration"
                 } else {
                     "the principal point estimated (the configuration frees it)"
                 };
-                eprintln!("track: camera correction estimates fx and fy; {k1}; {pp}");
+                eprintln!("track: camera correction estimates fx (fy follows at the calibrated aspect); {k1}; {pp}");
             }
             let m =
                 endofuse::track::run(&scene, &out, mode, range, &config, None, &progress("track"))?;
@@ -316,6 +319,16 @@ fn run(cli: Cli) -> Result<()> {
                      cameras fixed (mode {}): depth explained it, so hidden structures may be off \
                      there (confidence lowered; LSC corrects the cameras)",
                     m.depth_explains_zoom_frames, m.mode
+                );
+            }
+            for (what, n) in &m.refused_frames {
+                eprintln!(
+                    "track: warning: {what} in {n} frames (see trajectory.json's warnings): {}",
+                    if what == endofuse::scene::trajectory::PLACEMENT_REFUSED {
+                        "a fresh placement after lost frames landed implausibly far away; the frames stay lost"
+                    } else {
+                        "camera correction left the plausible range; those frames were fitted with the cameras as before"
+                    }
                 );
             }
             if let Some(d) = &m.dice {

@@ -61,6 +61,10 @@ pub struct TrackMetrics {
     /// Frames whose apparent size changed as in a zoom with the cameras fixed (trajectory.json
     /// warns "depth_explains_zoom" on each): the hidden structures may be off there.
     pub depth_explains_zoom_frames: usize,
+    /// Frames per refusal ("camera_correction_refused", "placement_refused"; trajectory.json
+    /// warns on each): what the tracker would have done looked implausible.
+    #[serde(skip_serializing_if = "std::collections::BTreeMap::is_empty")]
+    pub refused_frames: std::collections::BTreeMap<String, usize>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub dice: Option<DiceSummary>,
     #[serde(skip_serializing_if = "BTreeMap::is_empty")]
@@ -199,6 +203,7 @@ pub struct Recorder<'a> {
     ms: Vec<f64>,
     lost_frames: usize,
     depth_zoom_frames: usize,
+    refused_frames: std::collections::BTreeMap<String, usize>,
     /// Also write overlay PNGs (`overlay/{camera}/{frame}.png`), as the app's export does.
     pub overlays: bool,
     /// The configuration the frames were fitted with, for metrics.json.
@@ -228,6 +233,7 @@ impl<'a> Recorder<'a> {
             ms: Vec::new(),
             lost_frames: 0,
             depth_zoom_frames: 0,
+            refused_frames: Default::default(),
             overlays: false,
             config: None,
             forest: None,
@@ -321,6 +327,9 @@ impl<'a> Recorder<'a> {
         self.ms.push(f.ms);
         self.lost_frames += f.lost as usize;
         self.depth_zoom_frames += f.depth_explains_zoom as usize;
+        for w in &f.refused {
+            *self.refused_frames.entry(w.to_string()).or_default() += 1;
+        }
         self.trajectory.frames.push(TrajectoryFrame {
             frame: t as u32,
             affine: f.state.affine.q.to_vec(),
@@ -336,11 +345,13 @@ impl<'a> Recorder<'a> {
             ms: Some(f.ms),
             confidence: Some(f.confidence),
             lost: Some(f.lost),
-            warnings: if f.depth_explains_zoom {
-                vec![crate::scene::trajectory::DEPTH_EXPLAINS_ZOOM.to_string()]
-            } else {
-                Vec::new()
-            },
+            warnings: f
+                .depth_explains_zoom
+                .then_some(crate::scene::trajectory::DEPTH_EXPLAINS_ZOOM)
+                .into_iter()
+                .chain(f.refused.iter().copied())
+                .map(String::from)
+                .collect(),
         });
         Ok(())
     }
@@ -374,6 +385,7 @@ impl<'a> Recorder<'a> {
             frames: self.trajectory.frames.len(),
             lost_frames: self.lost_frames,
             depth_explains_zoom_frames: self.depth_zoom_frames,
+            refused_frames: self.refused_frames,
             dice: (!self.all_dice.is_empty()).then(|| DiceSummary {
                 mean: mean(&self.all_dice),
                 by_structure: self

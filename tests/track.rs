@@ -284,6 +284,31 @@ fn a_zoom_is_followed_by_focal_length_and_principal_point() {
         let (a, b) = (at(&fitted, f, "k1"), at(&truth, f, "k1"));
         assert!((a - b).abs() < 0.005, "frame {f}: k1 {a} against {b}");
     }
+    // A correction past what the configuration calls plausible (here fx beyond ±5 %) is
+    // refused frame by frame, warned of, and counted: fx never leaves the range.
+    let narrow_dir = tmp("narrow-zoom");
+    std::fs::create_dir_all(&narrow_dir).unwrap();
+    let narrow = narrow_dir.join("config.json");
+    std::fs::write(&narrow, r#"{"tracking": {"max_zoom_factor": 1.05}}"#).unwrap();
+    let refused = tmp("zoom-out-refused");
+    track_ok(&scene, &refused, &["--config", narrow.to_str().unwrap()]);
+    let r = json(&refused.join("trajectory.json"));
+    let mut warned = 0;
+    for f in r["frames"].as_array().unwrap() {
+        let fx = f["cameras"][0]["fx"].as_f64().unwrap();
+        assert!(
+            fx <= 1.05 * at(&truth, 0, "fx") + 1e-6,
+            "frame {}: fx {fx}",
+            f["frame"]
+        );
+        warned += f["warnings"]
+            .as_array()
+            .is_some_and(|w| w.iter().any(|x| x == "camera_correction_refused"))
+            as u64;
+    }
+    assert!(warned >= 3, "refused frames: {warned}");
+    let rm = json(&refused.join("metrics.json"));
+    assert_eq!(rm["refused_frames"]["camera_correction_refused"], warned);
     // Freed by the configuration, the principal point follows the drift.
     let free = tmp("zoom-out-free-pp");
     let config_dir = tmp("free-pp");

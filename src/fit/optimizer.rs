@@ -77,19 +77,23 @@ pub fn step(
             b: p.transpose() * &eq.b,
         };
     }
-    // k1 is no free parameter: silhouettes barely see it, and left free it mimicked focal
-    // changes (k1 −1.3 against +0.03 on a zoom in and out, issue 14). It follows fx by the
-    // scene's relation, or stays as calibrated; its row and column go, so the other
-    // intrinsics are solved for without it.
-    let holds_k1 = matches!(block, Block::Cameras(_));
-    if holds_k1 {
+    // Of the shared intrinsics only fx is free. fy follows it at the calibrated aspect (a zoom
+    // scales both alike; fitted apart, fy/fx wandered over 3 % on a 320×180 phantom). k1 is
+    // barely seen by silhouettes, and left free it mimicked focal changes (k1 −1.3 against
+    // +0.03 on a zoom in and out, issue 14): it follows fx by the scene's relation, or stays as
+    // calibrated. Their rows and columns go, so fx and the principal point are solved for
+    // without them.
+    let holds_fy_k1 = matches!(block, Block::Cameras(_));
+    if holds_fy_k1 {
         let size = eq.size();
-        for j in 0..size {
-            eq.h[(K1, j)] = 0.0;
-            eq.h[(j, K1)] = 0.0;
+        for k in [FY, K1] {
+            for j in 0..size {
+                eq.h[(k, j)] = 0.0;
+                eq.h[(j, k)] = 0.0;
+            }
+            eq.h[(k, k)] = 1.0;
+            eq.b[k] = 0.0;
         }
-        eq.h[(K1, K1)] = 1.0;
-        eq.b[K1] = 0.0;
     }
     let b_data = eq.b.clone();
     let size = eq.size();
@@ -120,7 +124,8 @@ pub fn step(
             return None;
         }
         let mut delta = delta.clone();
-        if holds_k1 {
+        if holds_fy_k1 {
+            delta[FY] = 0.0;
             delta[K1] = 0.0;
         }
         let full = match &rig {
@@ -132,8 +137,11 @@ pub fn step(
             let scaled: Vec<f64> = full.iter().map(|d| d * scale).collect();
             let mut next = apply_increment(state, block, &scaled, centre);
             ctx.model.shape.pca.clamp_weights(&mut next.shape);
-            if holds_k1 {
+            if holds_fy_k1 {
                 for (m, intr) in next.intrinsics.iter_mut().enumerate() {
+                    if let Some(cal) = ctx.cameras.get(m) {
+                        intr.fy = intr.fx * cal.intrinsics.fy / cal.intrinsics.fx;
+                    }
                     if let Some(k1) = ctx.k1_at(m, intr.fx) {
                         intr.k1 = k1;
                     }
@@ -241,7 +249,8 @@ fn add_priors<'a>(
     }
 }
 
-/// Index of k1 among a camera block's shared parameters (fx, fy, cx, cy, k1).
+/// Indices of fy and k1 among a camera block's shared parameters (fx, fy, cx, cy, k1).
+const FY: usize = 1;
 const K1: usize = 4;
 
 /// ∂(all cameras' intrinsics)/∂(shared increment): 5·cameras × 5, each camera's five

@@ -95,6 +95,9 @@ pub struct TrackedFrame {
     /// The apparent size changed as in a zoom with the cameras fixed: depth explained it, so
     /// the hidden structures may be off (the confidence is lowered).
     pub depth_explains_zoom: bool,
+    /// What else the tracker refused in this frame (`trajectory::CAMERA_CORRECTION_REFUSED`,
+    /// `trajectory::PLACEMENT_REFUSED`), for trajectory.json's warnings.
+    pub refused: Vec<&'static str>,
     /// Front-most visible structure per pixel, per camera.
     pub labels: Vec<LabelImage>,
     /// Each hidden structure's projection per camera (occlusion ignored).
@@ -232,6 +235,7 @@ struct Outcome {
     lost: bool,
     /// The apparent size changed as in a zoom and only the pose could follow it.
     depth_explains_zoom: bool,
+    refused: Vec<&'static str>,
 }
 
 impl<'a> FrameTracker<'a> {
@@ -315,7 +319,21 @@ impl<'a> FrameTracker<'a> {
         } else if correct_cameras && !in_zoom && !self.is_lost(&fit) {
             self.zoom.corrected(&self.good, &fit.state);
         }
-        let (fit, lost) = self.placed_afresh_if_lost(t, views, fit);
+        let mut refused = Vec::new();
+        if correct_cameras && !self.cameras_plausible(&fit.state) {
+            // A runaway correction: the frame is fitted again with the cameras as they were.
+            log::info!("frame {t}: camera correction refused (fx or fy/fx implausible)");
+            refused.push(crate::scene::trajectory::CAMERA_CORRECTION_REFUSED);
+            self.zoom.reset();
+            fit = self.fit(
+                views,
+                &self.good.clone(),
+                &options.params(phase, Zoom::PoseOnly),
+            );
+            correct_cameras = false;
+            self.cancelled()?;
+        }
+        let (fit, lost) = self.placed_afresh_if_lost(t, views, fit, &mut refused);
         let depth_explains_zoom = !correct_cameras
             && !lost
             && (in_zoom || (options.mode != Mode::LSC && self.size_changes_like_a_zoom(t, &fit)));
@@ -338,7 +356,26 @@ impl<'a> FrameTracker<'a> {
             state,
             lost,
             depth_explains_zoom,
+            refused,
         })
+    }
+
+    /// Whether corrected intrinsics are ones a zoom can give: fx within `max_zoom_factor` of
+    /// calibration either way, and fy/fx within `max_aspect_change` of the calibrated ratio.
+    fn cameras_plausible(&self, state: &FitState) -> bool {
+        let k = &self.options.config.tracking;
+        state
+            .intrinsics
+            .iter()
+            .zip(self.scene.cameras.iter())
+            .all(|(now, cam)| {
+                let cal = &cam.intrinsics;
+                let zoom = now.fx / cal.fx;
+                let aspect = (now.fy / now.fx) / (cal.fy / cal.fx);
+                zoom.is_finite()
+                    && (1.0 / k.max_zoom_factor..=k.max_zoom_factor).contains(&zoom)
+                    && (aspect - 1.0).abs() <= k.max_aspect_change
+            })
     }
 
     /// Without camera correction: did this frame's apparent size change as in a zoom (the
@@ -380,6 +417,7 @@ impl<'a> FrameTracker<'a> {
         t: usize,
         views: &mut [ViewProbabilities],
         fit: FrameFit,
+        refused: &mut Vec<&'static str>,
     ) -> (FrameFit, bool) {
         if !self.is_lost(&fit) {
             self.lost_run = 0;
@@ -417,11 +455,22 @@ impl<'a> FrameTracker<'a> {
             &self.options.params(Phase::FirstFrame, Zoom::Off),
         );
         if self.is_lost(&again) {
-            (fit, true)
-        } else {
-            self.lost_run = 0;
-            (again, false)
+            return (fit, true);
         }
+        // A placement is a guess from one frame; one that puts the organ centimetres from
+        // where it was a few frames ago found something else.
+        let centre = |s: &FitState| {
+            s.affine
+                .apply(self.ctx.model_centre(&self.ctx.model.deformed(&s.shape)))
+        };
+        let jump = (centre(&again.state) - centre(&self.good)).length();
+        if jump > config.tracking.reinit_max_jump_mm {
+            log::info!("frame {t}: fresh placement {jump:.0} mm from the last good pose refused");
+            refused.push(crate::scene::trajectory::PLACEMENT_REFUSED);
+            return (fit, true);
+        }
+        self.lost_run = 0;
+        (again, false)
     }
 }
 
@@ -470,6 +519,7 @@ pub fn track(
             state,
             lost,
             depth_explains_zoom,
+            refused,
         } = tracker.frame(t, &mut views)?;
         let ms = started.elapsed().as_secs_f64() * 1e3;
         let Rendered {
@@ -501,6 +551,7 @@ pub fn track(
             },
             lost,
             depth_explains_zoom,
+            refused,
             labels,
             hidden,
             centroids,

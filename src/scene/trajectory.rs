@@ -98,6 +98,13 @@ pub struct TrajectoryFrame {
 
 /// The warning of a frame where depth alone explained a change of apparent size.
 pub const DEPTH_EXPLAINS_ZOOM: &str = "depth_explains_zoom";
+/// The warning of a frame whose camera correction left the plausible range (focal length far
+/// from calibration, or fy/fx off the lens's aspect): the frame was fitted with the cameras as
+/// before it instead.
+pub const CAMERA_CORRECTION_REFUSED: &str = "camera_correction_refused";
+/// The warning of a lost frame whose fresh placement landed implausibly far from the last good
+/// pose: it was refused and the frame stays lost.
+pub const PLACEMENT_REFUSED: &str = "placement_refused";
 
 /// Reads a value of the expected type, or its default when the file gives something else
 /// under the key (CONTRACT §3: readers ignore what they do not know, whatever its type).

@@ -123,8 +123,9 @@ pub struct PriorConfig {
     /// cannot tell a shift of both principal points from the organ sliding sideways, and left
     /// free (1) it wandered 8–15 px off on widened phantoms whose true drift was under 4 px
     /// (issue 14; on the project's own seed 7 it followed a 10 px drift within 4 px — lower
-    /// these to estimate it). k1 is never free (`optimizer`: it follows fx by the scene's
-    /// `k1_vs_focal`, or stays as calibrated); its entry is kept for old configurations.
+    /// these to estimate it). fy and k1 are never free (`optimizer`: fy follows fx at the
+    /// calibrated aspect; k1 follows fx by the scene's `k1_vs_focal`, or stays as calibrated);
+    /// their entries are kept for old configurations.
     pub camera_relative: [f64; 5],
 }
 
@@ -326,6 +327,17 @@ pub struct TrackingConfig {
     /// camera correction: R, L, LS, or LSC outside a correction) reports its confidence times
     /// this: the fit may look right while the hidden structures are off by the depth error.
     pub depth_zoom_confidence: f64,
+    /// A fresh placement after lost frames whose model centre lands farther than this (mm)
+    /// from the last good frame's is refused, and the frame stays lost: an organ does not
+    /// jump centimetres in a few frames (one independent scene's re-placement landed 18 cm
+    /// off and was taken, issue 14).
+    pub reinit_max_jump_mm: f64,
+    /// Camera correction is refused (the frame refitted with the cameras as before) where it
+    /// takes fx further than this factor from calibration either way, or fy/fx more than
+    /// `max_aspect_change` from the calibrated ratio: a zoom scales both alike, and a runaway
+    /// correction reached fx +73 % with confidence 0.33 while nothing said so (issue 14).
+    pub max_zoom_factor: f64,
+    pub max_aspect_change: f64,
 }
 
 impl Default for TrackingConfig {
@@ -339,6 +351,9 @@ impl Default for TrackingConfig {
             occluder_margin_px: 3.0,
             occluder_background: 0.6,
             depth_zoom_confidence: 0.5,
+            reinit_max_jump_mm: 40.0,
+            max_zoom_factor: 2.0,
+            max_aspect_change: 0.03,
         }
     }
 }

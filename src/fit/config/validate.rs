@@ -190,6 +190,9 @@ impl FitConfig {
             1..=10_000,
         )?;
         non_negative("tracking.occluder_margin_px", k.occluder_margin_px as f64)?;
+        non_negative("tracking.reinit_max_jump_mm", k.reinit_max_jump_mm)?;
+        within("tracking.max_zoom_factor", k.max_zoom_factor, 1.0..=100.0)?;
+        within("tracking.max_aspect_change", k.max_aspect_change, 0.0..=1.0)?;
         within(
             "tracking.occluder_background",
             k.occluder_background,
