@@ -298,7 +298,9 @@ fn run(cli: Cli) -> Result<()> {
                 } else {
                     "the principal point estimated (the configuration frees it)"
                 };
-                eprintln!("track: camera correction estimates fx (fy follows at the calibrated aspect); {k1}; {pp}");
+                eprintln!(
+                    "track: camera correction estimates fx (fy follows at the calibrated aspect); {k1}; {pp}"
+                );
             }
             let m =
                 endofuse::track::run(&scene, &out, mode, range, &config, None, &progress("track"))?;

@@ -338,7 +338,12 @@ type Sample = (features::FeatureVector, u8, bool);
 /// a stroke reads again only the image the stroke changed (3 seeded frames of 2 views at
 /// 960×540: 105 ms → ~20 ms). One cache serves one scene's frames and structures.
 #[derive(Default)]
-pub struct SampleCache(Mutex<HashMap<(usize, usize), (u64, Arc<Vec<Sample>>)>>);
+pub struct SampleCache(Mutex<HashMap<ImageKey, CachedSamples>>);
+
+/// A seeded image: camera and frame.
+type ImageKey = (usize, usize);
+/// The hash of an image's strokes, and its samples.
+type CachedSamples = (u64, Arc<Vec<Sample>>);
 
 impl SampleCache {
     fn get(&self, key: (usize, usize), hash: u64) -> Option<Arc<Vec<Sample>>> {
