@@ -170,6 +170,16 @@ fn bad_values_in_scene_json() {
             Box::new(|v| v["structures"][1]["name"] = "kidney".into()),
             "named 'kidney'",
         ),
+        (
+            "k1-relation",
+            Box::new(|v| v["k1_vs_focal"] = serde_json::json!([0.2, 1e300, 0])),
+            "k1_vs_focal",
+        ),
+        (
+            "k1-relation-short",
+            Box::new(|v| v["k1_vs_focal"] = serde_json::json!([0.2, -0.07])),
+            "k1_vs_focal",
+        ),
     ];
     for (name, edit, words) in cases {
         let d = scratch(name);

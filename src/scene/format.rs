@@ -27,7 +27,8 @@ pub struct SceneFile {
     /// sets k1 from its fx estimate; without it, LSC holds k1 at calibration (silhouettes
     /// barely see k1: left free it drifted to −1.3 on a zoom in and out, issue 14).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub k1_vs_focal: Option<[f64; 3]>,
+    /// (A list, checked in `load`, so a wrong length is named in words.)
+    pub k1_vs_focal: Option<Vec<f64>>,
 }
 
 fn is_zero(v: &f64) -> bool {

@@ -249,13 +249,19 @@ impl Scene {
             }
             zoom_changes.push((a as usize, b as usize));
         }
-        if let Some(c) = file.k1_vs_focal
-            && c.iter().any(|v| !v.is_finite() || v.abs() > 1e3)
-        {
-            return Err(bad(format!(
-                "k1_vs_focal: {c:?} must be three finite coefficients (k1 = c0 + c1/f + c2/f², f = fx / width)"
-            )));
-        }
+        let k1_vs_focal = match &file.k1_vs_focal {
+            None => None,
+            Some(c) => match c.as_slice() {
+                &[c0, c1, c2] if c.iter().all(|v| v.is_finite() && v.abs() <= 1e3) => {
+                    Some([c0, c1, c2])
+                }
+                _ => {
+                    return Err(bad(format!(
+                        "k1_vs_focal: {c:?} must be three finite coefficients of at most 1000 (k1 = c0 + c1/f + c2/f², f = fx / width)"
+                    )));
+                }
+            },
+        };
         let mut scene = Scene {
             root: Some(root.to_path_buf()),
             origin: json_path.display().to_string(),
@@ -269,7 +275,7 @@ impl Scene {
             seeds_template: None,
             ground_truth: GroundTruth::default(),
             zoom_changes,
-            k1_vs_focal: file.k1_vs_focal,
+            k1_vs_focal,
             cache: Arc::new(FrameCache::new(frames::DEFAULT_CACHE_FRAMES)),
         };
         scene.check_frame_headers()?;

@@ -234,7 +234,7 @@ pub fn write_scene(
             .iter()
             .map(|&(a, b)| [a as i64, b as i64])
             .collect(),
-        k1_vs_focal: phantom.k1_vs_focal(),
+        k1_vs_focal: phantom.k1_vs_focal().map(|c| c.to_vec()),
     };
     write_json_atomic(&dir.join("scene.json"), &file)
 }

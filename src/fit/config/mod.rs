@@ -455,7 +455,7 @@ mod tests {
         assert!(zoom.correct_cameras);
         assert_eq!(zoom.priors.pose_damping, 10.0);
         assert_eq!(zoom.priors.shape_damping, 2.0);
-        assert_eq!((zoom.rounds, zoom.rebuild_every), (2, 3));
+        assert_eq!((zoom.rounds, zoom.rebuild_every), (1, 6));
         assert!(
             !c.resolve(Mode::LS, Phase::Tracked, Zoom::Cameras, 1)
                 .correct_cameras
