@@ -27,6 +27,8 @@ pub struct StructureModel {
     pub visible: bool,
     pub faces: Vec<[u32; 3]>,
     pub edges: Vec<Edge>,
+    /// Every edge shared by exactly two faces (rasters may cull its back faces).
+    pub closed: bool,
     /// Index into the joint shape model's parts.
     pub part: usize,
 }
@@ -61,6 +63,7 @@ impl Model {
                 label: s.label,
                 visible: s.visible,
                 faces: s.mesh.faces.clone(),
+                closed: is_closed(&s.mesh.faces),
                 edges: edges(&s.mesh),
                 part: i,
             })
@@ -89,6 +92,7 @@ impl Model {
             .map(|&i| RenderObject {
                 vertices: &posed[i],
                 faces: &self.structures[i].faces,
+                closed: self.structures[i].closed,
             })
             .collect()
     }
@@ -107,6 +111,21 @@ impl Model {
             .map(|v| v.iter().map(|&p| affine.apply(p)).collect())
             .collect()
     }
+}
+
+/// Whether every undirected edge of `faces` belongs to exactly two of them, once each way
+/// (closed, edge-manifold and consistently wound).
+pub fn is_closed(faces: &[[u32; 3]]) -> bool {
+    let mut directed: std::collections::HashMap<(u32, u32), u32> = Default::default();
+    for f in faces {
+        for k in 0..3 {
+            *directed.entry((f[k], f[(k + 1) % 3])).or_default() += 1;
+        }
+    }
+    !faces.is_empty()
+        && directed
+            .iter()
+            .all(|(&(a, b), &n)| n == 1 && directed.get(&(b, a)) == Some(&1))
 }
 
 fn edges(mesh: &Mesh) -> Vec<Edge> {

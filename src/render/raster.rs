@@ -21,6 +21,9 @@ pub const NO_TRIANGLE: u32 = u32::MAX;
 pub struct RenderObject<'a> {
     pub vertices: &'a [DVec3],
     pub faces: &'a [[u32; 3]],
+    /// Closed and edge-manifold: every edge shared by exactly two faces, so a back face is
+    /// never the nearest surface and [`RasterOptions::cull_back_faces`] may skip it.
+    pub closed: bool,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -29,6 +32,9 @@ pub struct RasterOptions {
     pub tolerance_px: f64,
     /// How many times a triangle may be split in four.
     pub max_subdivision: u32,
+    /// Skip the back faces of closed objects: exact (a ray meets a closed surface's front
+    /// face before any back face of it), and half the triangles (the fit's visibility raster).
+    pub cull_back_faces: bool,
 }
 
 impl Default for RasterOptions {
@@ -36,6 +42,7 @@ impl Default for RasterOptions {
         Self {
             tolerance_px: 0.2,
             max_subdivision: 5,
+            cull_back_faces: false,
         }
     }
 }
@@ -115,10 +122,32 @@ pub fn rasterize(camera: &Camera, objects: &[RenderObject], options: &RasterOpti
     for (oi, obj) in objects.iter().enumerate().take(NO_OBJECT as usize) {
         let cam: Vec<DVec3> = obj.vertices.iter().map(|&p| camera.to_camera(p)).collect();
         let px: Vec<Option<DVec2>> = cam.iter().map(|&p| intr.project(p)).collect();
+        // Which way the faces wind (the affine may mirror the mesh): the sign of its volume.
+        let winding = (options.cull_back_faces && obj.closed)
+            .then(|| {
+                let volume: f64 = obj
+                    .faces
+                    .iter()
+                    .filter(|f| f.iter().all(|&k| (k as usize) < cam.len()))
+                    .map(|f| {
+                        let [a, b, c] = f.map(|k| cam[k as usize]);
+                        a.dot(b.cross(c))
+                    })
+                    .sum();
+                (volume.abs() > 1e-9).then_some(volume.signum())
+            })
+            .flatten();
         for (fi, f) in obj.faces.iter().enumerate() {
             let idx = f.map(|k| k as usize);
             if idx.iter().any(|&k| k >= cam.len()) {
                 continue;
+            }
+            if let Some(sign) = winding {
+                let [a, b, c] = idx.map(|k| cam[k]);
+                // Outward normal (sign-corrected) pointing away from the camera: a back face.
+                if sign * (b - a).cross(c - a).dot(a) >= 0.0 {
+                    continue;
+                }
             }
             let (Some(p0), Some(p1), Some(p2)) = (px[idx[0]], px[idx[1]], px[idx[2]]) else {
                 continue;
@@ -378,6 +407,7 @@ mod tests {
                 .map(|m| RenderObject {
                     vertices: &m.vertices,
                     faces: &m.faces,
+                    closed: false,
                 })
                 .collect();
             let fast = rasterize(&cam, &objects, &RasterOptions::default());
@@ -455,5 +485,48 @@ mod tests {
     fn distorted_raster_matches_ray_casting() {
         compare(-0.25, 62, 0.05);
         compare(0.2, 63, 0.05);
+    }
+
+    /// Culling closed objects' back faces changes nothing a raster says (object, triangle,
+    /// depth), mirrored meshes included (their faces wind the other way).
+    #[test]
+    fn culling_back_faces_of_closed_meshes_is_exact() {
+        let mut rng = Rng::new(71);
+        for k1 in [0.0, -0.2] {
+            let (cam, mut meshes) = scene(&mut rng, k1);
+            // Mirror one mesh through its centre's x: its winding flips.
+            let c = meshes[1].vertex_mean();
+            for v in &mut meshes[1].vertices {
+                v.x = 2.0 * c.x - v.x;
+            }
+            let objects: Vec<RenderObject> = meshes
+                .iter()
+                .map(|m| RenderObject {
+                    vertices: &m.vertices,
+                    faces: &m.faces,
+                    closed: crate::fit::model::is_closed(&m.faces),
+                })
+                .collect();
+            assert!(objects.iter().all(|o| o.closed));
+            let all = rasterize(&cam, &objects, &RasterOptions::default());
+            let culled = rasterize(
+                &cam,
+                &objects,
+                &RasterOptions {
+                    cull_back_faces: true,
+                    ..RasterOptions::default()
+                },
+            );
+            let covered = all.object.data.iter().filter(|&&o| o != NO_OBJECT).count();
+            assert!(covered > 500, "the meshes cover {covered} px");
+            let differ = (0..all.object.data.len())
+                .filter(|&i| {
+                    all.object.data[i] != culled.object.data[i]
+                        || all.triangle.data[i] != culled.triangle.data[i]
+                        || all.depth_mm.data[i] != culled.depth_mm.data[i]
+                })
+                .count();
+            assert_eq!(differ, 0, "k1 {k1}: {differ} of {covered} pixels differ");
+        }
     }
 }

@@ -52,7 +52,14 @@ impl FrameContext<'_> {
                 let vis_size = ((size.0 / 2).max(1), (size.1 / 2).max(1));
                 let vis_cam = cam.at_level(&state.intrinsics[m], params.level + 1, vis_size);
                 let raster = crate::fit::profile::time(crate::fit::profile::Phase::Raster, || {
-                    rasterize(&vis_cam, &objects, &RasterOptions::default())
+                    rasterize(
+                        &vis_cam,
+                        &objects,
+                        &RasterOptions {
+                            cull_back_faces: true,
+                            ..RasterOptions::default()
+                        },
+                    )
                 });
                 let (vw, vh) = (vis_size.0 as i64, vis_size.1 as i64);
                 let centre = cam.extrinsics.center_mm();

@@ -176,6 +176,7 @@ mod tests {
             .map(|i| RenderObject {
                 vertices: &posed[i],
                 faces: &scene.structures[i].mesh.faces,
+                closed: false,
             })
             .collect();
         let cams = phantom.cameras(0);

@@ -111,6 +111,7 @@ impl Phantom {
             .map(|&i| RenderObject {
                 vertices: &drawn[i].posed,
                 faces: &drawn[i].faces,
+                closed: false,
             })
             .collect();
         let mut images = Vec::new();
@@ -142,6 +143,7 @@ impl Phantom {
             let obj = [RenderObject {
                 vertices: &drawn[s].posed,
                 faces: &mesh.faces,
+                closed: false,
             }];
             hidden.push((
                 name.to_string(),
