@@ -98,6 +98,15 @@ def track(scene, mode, work):
     return out, m, m["dice"]["mean"], None
 
 
+def without_initial_pose(scene):
+    """The scene's scene.json without its initial_pose, beside it: placed automatically."""
+    d = json.load(open(os.path.join(scene, "scene.json")))
+    d.pop("initial_pose", None)
+    path = os.path.join(scene, "scene-noinit.json")
+    json.dump(d, open(path, "w"))
+    return path
+
+
 def row(spec, work):
     scene = make_scene(spec, work)
     seed, w, h, noise, views, case, zoom = spec
@@ -106,6 +115,10 @@ def row(spec, work):
     res = {}
     for mode in ["LS", "LSC"]:
         res[mode] = track(scene, mode, work)
+    # From no initial pose at all: the automatic placement, then LSC.
+    out = os.path.join(work, f"out-{os.path.basename(scene)}-LSC-noinit")
+    run([BIN, "track", without_initial_pose(scene), "--out", out, "--mode", "LSC"])
+    res["noinit"] = json.load(open(os.path.join(out, "metrics.json")))["dice"]
     return what, scene, res
 
 
@@ -121,9 +134,11 @@ def hidden_mm(m):
 def table(name, specs, work):
     print(f"\n{name} set ({len(specs)} scenes, {FRAMES} frames each)\n")
     print("| scene | LS Dice | LSC Dice | hidden LS / LSC mean (max) mm | LSC fx err mean (max) % "
-          "| LSC pp err mean (max) px | LSC k1 err max | LS / LSC ms per frame |")
-    print("|---|---|---|---|---|---|---|---|")
-    agg = {"dice": [], "hidden": [], "hidden_max": [], "fx": [], "k1": [], "ms_ls": [], "ms_lsc": []}
+          "| LSC pp err mean (max) px | LSC k1 err max | LS / LSC ms per frame "
+          "| LSC without initial pose: frame-0 / mean Dice |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    agg = {"dice": [], "hidden": [], "hidden_max": [], "fx": [], "k1": [], "ms_ls": [], "ms_lsc": [],
+           "noinit0": []}
     for spec in specs:
         what, scene, res = row(spec, work)
         (o_ls, m_ls, d_ls, _), (o_lsc, m_lsc, d_lsc, _) = res["LS"], res["LSC"]
@@ -133,8 +148,11 @@ def table(name, specs, work):
         ms_ls = m_ls["timing"]["ms_per_frame"]["median"]
         ms_lsc = m_lsc["timing"]["ms_per_frame"]["median"]
         hid = "–" if h_ls is None else f"{h_ls:.2f} / {h_lsc:.2f} ({hmax_lsc:.2f})"
+        ni = res["noinit"]
         print(f"| {what} | {d_ls:.3f} | {d_lsc:.3f} | {hid} | {fx:.2f} ({fxmax:.2f}) "
-              f"| {pp:.2f} ({ppmax:.2f}) | {k1:.3f} | {ms_ls:.1f} / {ms_lsc:.1f} |", flush=True)
+              f"| {pp:.2f} ({ppmax:.2f}) | {k1:.3f} | {ms_ls:.1f} / {ms_lsc:.1f} "
+              f"| {ni['per_frame'][0]:.3f} / {ni['mean']:.3f} |", flush=True)
+        agg["noinit0"].append(ni["per_frame"][0])
         agg["dice"].append(d_lsc)
         if h_lsc is not None:
             agg["hidden"].append(h_lsc)
@@ -147,7 +165,8 @@ def table(name, specs, work):
           f"{statistics.mean(agg['hidden']) if agg['hidden'] else float('nan'):.2f} mm, worst "
           f"{max(agg['hidden_max']) if agg['hidden_max'] else float('nan'):.2f} mm; fx error mean "
           f"{statistics.mean(agg['fx']):.2f} %; k1 error max {max(agg['k1']):.3f}; median ms per "
-          f"frame LS {statistics.median(agg['ms_ls']):.1f}, LSC {statistics.median(agg['ms_lsc']):.1f}")
+          f"frame LS {statistics.median(agg['ms_ls']):.1f}, LSC {statistics.median(agg['ms_lsc']):.1f}; "
+          f"placed automatically, frame-0 Dice min {min(agg['noinit0']):.3f}")
 
 
 def main():
