@@ -101,7 +101,11 @@ pub fn export_results(
             confidence: r.confidence,
             lost: r.lost,
             depth_explains_zoom: r.depth_explains_zoom,
-            refused: Vec::new(),
+            refused: r
+                .refused
+                .iter()
+                .filter_map(|w| crate::scene::trajectory::known_warning(w))
+                .collect(),
             labels: rendered.labels,
             hidden: rendered.hidden,
             centroids: rendered.centroids,

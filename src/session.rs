@@ -60,6 +60,10 @@ pub struct FrameResult {
     /// [`crate::fit::tracker::TrackedFrame::depth_explains_zoom`]).
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub depth_explains_zoom: bool,
+    /// What the tracker refused in this frame (`camera_correction_refused`,
+    /// `placement_refused`; see [`crate::fit::tracker::TrackedFrame::refused`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub refused: Vec<String>,
 }
 
 /// One painted view and frame, run-length coded: (run length, seed value).

@@ -415,6 +415,7 @@ impl EndofuseApp {
                     dice: Vec::new(),
                     hidden_error_mm: self.hidden_errors(&f),
                     depth_explains_zoom: f.depth_explains_zoom,
+                    refused: f.refused.iter().map(|w| w.to_string()).collect(),
                 };
                 if self.view.follow_tracking {
                     self.view.frame = f.frame;

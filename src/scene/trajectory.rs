@@ -106,6 +106,13 @@ pub const CAMERA_CORRECTION_REFUSED: &str = "camera_correction_refused";
 /// pose: it was refused and the frame stays lost.
 pub const PLACEMENT_REFUSED: &str = "placement_refused";
 
+/// The tracker's own name for a refusal a session recorded (None for anything else).
+pub fn known_warning(w: &str) -> Option<&'static str> {
+    [CAMERA_CORRECTION_REFUSED, PLACEMENT_REFUSED]
+        .into_iter()
+        .find(|k| *k == w)
+}
+
 /// Reads a value of the expected type, or its default when the file gives something else
 /// under the key (CONTRACT §3: readers ignore what they do not know, whatever its type).
 fn lenient<'de, D, T>(d: D) -> Result<T, D::Error>

@@ -149,10 +149,14 @@ pub fn timeline(shown: &Shown, layout: &mut Layout, ui: &mut egui::Ui) {
                 ui.label(format!(
                     "confidence {:.2}{}  ·  {:.0} ms",
                     r.confidence,
-                    if r.lost {
+                    if r.lost && r.refused.iter().any(|w| w == "placement_refused") {
+                        " (lost; a far placement refused)"
+                    } else if r.lost {
                         " (lost)"
                     } else if r.depth_explains_zoom {
                         " (zoom followed by depth)"
+                    } else if !r.refused.is_empty() {
+                        " (camera correction refused)"
                     } else {
                         ""
                     },
