@@ -35,6 +35,8 @@ pub enum Command {
     /// Per-class probabilities of one frame in every view: a coarse map first, then the full.
     Classify {
         frame: usize,
+        /// Echoed in the maps' events: the app takes only the answer to its latest request.
+        request: u64,
     },
     /// Automatic initial pose on a frame.
     Initialise {
@@ -59,6 +61,8 @@ pub enum Task {
     Load,
     Train,
     Classify,
+    /// The held-out figure after a Train.
+    Validate,
     Initialise,
     Track,
     Export,
@@ -79,6 +83,7 @@ pub enum Event {
         frame: usize,
         maps: Arc<Vec<ProbabilityMaps>>,
         coarse: bool,
+        request: u64,
     },
     /// The forest `of` with its held-out figure: replaces `of` where it is still in use.
     Validated {
@@ -251,7 +256,8 @@ fn task_of(c: &Command) -> Task {
     match c {
         Command::LoadScene(_) | Command::UseScene(_) | Command::SetSeeds(_) => Task::Load,
         Command::Train(_) | Command::SetAppearance(_) => Task::Train,
-        Command::Classify { .. } | Command::Validate => Task::Classify,
+        Command::Classify { .. } => Task::Classify,
+        Command::Validate => Task::Validate,
         Command::Initialise { .. } => Task::Initialise,
         Command::Track { .. } => Task::Track,
         Command::Export(_) | Command::Shutdown => Task::Export,
@@ -342,7 +348,7 @@ fn run(
                 emit(out, Event::Validated { of, validated })?;
             }
         }
-        Command::Classify { frame } => {
+        Command::Classify { frame, request } => {
             let scene = need_scene(state)?;
             let appearance = need_appearance(state)?;
             for coarse in [true, false] {
@@ -364,6 +370,7 @@ fn run(
                         frame,
                         maps: Arc::new(maps),
                         coarse,
+                        request,
                     },
                 )?;
             }
@@ -541,7 +548,10 @@ mod tests {
         assert!(trained.stats.samples > 100);
         assert!(trained.validation.is_none(), "the figure follows the maps");
         // The visible frame's maps: a coarse one first, then the full one, both full-size.
-        worker.send(Command::Classify { frame: 3 });
+        worker.send(Command::Classify {
+            frame: 3,
+            request: 1,
+        });
         let ev = until(&worker, |e| matches!(e, Event::Finished(Task::Classify)));
         let maps: Vec<(bool, usize, usize)> = ev
             .iter()
@@ -555,7 +565,7 @@ mod tests {
         assert_eq!(maps, vec![(true, 240, 136), (false, 240, 136)]);
         // Then the held-out figure, on the same forest.
         worker.send(Command::Validate);
-        let ev = until(&worker, |e| matches!(e, Event::Finished(Task::Classify)));
+        let ev = until(&worker, |e| matches!(e, Event::Finished(Task::Validate)));
         let Some(Event::Validated { of, validated }) =
             ev.iter().find(|e| matches!(e, Event::Validated { .. }))
         else {
@@ -566,7 +576,7 @@ mod tests {
         assert!(validated.validation.as_ref().unwrap().balanced_accuracy > 0.8);
         // Once only: a second Validate has nothing left to check.
         worker.send(Command::Validate);
-        let ev = until(&worker, |e| matches!(e, Event::Finished(Task::Classify)));
+        let ev = until(&worker, |e| matches!(e, Event::Finished(Task::Validate)));
         assert!(!ev.iter().any(|e| matches!(e, Event::Validated { .. })));
         worker.send(Command::Track {
             mode: Mode::LS,

@@ -15,6 +15,13 @@ use common::app::step_until;
 
 const SIZE: [f32; 2] = [1180.0, 700.0];
 
+/// One app at a time in this file: two harnesses painting and training at once on 2 cores
+/// starve each other's frame loaders, and a stroke can land before its view is laid out.
+fn one_app() -> std::sync::MutexGuard<'static, ()> {
+    static LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    LOCK.lock().unwrap_or_else(|p| p.into_inner())
+}
+
 fn harness() -> Harness<'static, EndofuseApp> {
     Harness::builder()
         .with_size(SIZE)
@@ -49,6 +56,7 @@ fn move_to(h: &mut Harness<'_, EndofuseApp>, pos: Pos2) {
 
 #[test]
 fn paint_train_track_scrub_and_review_the_demo() {
+    let _one_at_a_time = one_app();
     let mut h = harness();
     step_until(&mut h, "the demo to load", |a| a.doc.scene.is_some());
     let app = h.state();
@@ -248,6 +256,7 @@ fn paint_train_track_scrub_and_review_the_demo() {
 /// the full one), and the held-out figure follows.
 #[test]
 fn live_update_retrains_after_a_stroke_and_keeps_the_map_shown() {
+    let _one_at_a_time = one_app();
     let mut h = harness();
     step_until(&mut h, "the demo to load", |a| a.doc.scene.is_some());
     h.key_press(Key::T);

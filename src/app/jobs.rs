@@ -32,10 +32,17 @@ pub struct Jobs {
     exporting: Option<PathBuf>,
     /// Probability maps of recent frames, one per camera.
     pub probabilities: HashMap<usize, Arc<Vec<ProbabilityMaps>>>,
-    probability_asked: Option<usize>,
-    /// A frame whose maps are shown until better ones come: the quick coarse map, or the
+    /// The frame and request number of the maps asked for: only that answer is taken (a
+    /// request queued under an earlier forest must not pass for the current one's).
+    probability_asked: Option<(usize, u64)>,
+    probability_requests: u64,
+    /// Frames whose maps are shown until better ones come: the quick coarse map, or the
     /// earlier forest's maps after a retrain (no blank flash on every live retrain).
-    probability_refresh: Option<usize>,
+    probability_refresh: std::collections::HashSet<usize>,
+    /// Forests set (loaded, dropped, a scene opened) so far, and the count when the pending
+    /// Train was sent: a Trained overtaken by a later forest is dropped, as the worker's was.
+    forest_epoch: u64,
+    train_epoch: u64,
     /// The forest in use awaits its held-out figure (Command::Validate sent).
     pub validating: bool,
     /// Strokes changed at this time (s) and a live retrain is due.
@@ -107,6 +114,9 @@ impl EndofuseApp {
         doc.appearance = None;
         self.jobs.probabilities.clear();
         self.jobs.probability_asked = None;
+        self.jobs.probability_refresh.clear();
+        self.jobs.validating = false;
+        self.jobs.forest_epoch += 1;
         doc.placement = scene.initial_pose;
         doc.results.clear();
         self.screen.textures = Default::default();
@@ -133,12 +143,14 @@ impl EndofuseApp {
 
     /// Uses a forest the app holds (a loaded session): the worker gets it too.
     pub(super) fn use_forest(&mut self, forest: Arc<crate::appearance::Appearance>) {
+        self.jobs.forest_epoch += 1;
         self.send_job(Command::SetAppearance(Some(forest.clone())));
         self.forest_changed(Some(forest));
     }
 
     /// No forest (a session restored from before training).
     pub(super) fn drop_forest(&mut self) {
+        self.jobs.forest_epoch += 1;
         self.send_job(Command::SetAppearance(None));
         self.forest_changed(None);
         self.view.layer = Layer::Image;
@@ -155,10 +167,10 @@ impl EndofuseApp {
         self.doc.touch();
         self.jobs.validating = false;
         self.jobs.probabilities.clear();
-        self.jobs.probability_refresh = None;
+        self.jobs.probability_refresh.clear();
         if let Some(maps) = keep {
             self.jobs.probabilities.insert(frame, maps);
-            self.jobs.probability_refresh = Some(frame);
+            self.jobs.probability_refresh.insert(frame);
         }
         self.jobs.probability_asked = None;
         self.screen.textures.probability_key = None;
@@ -192,6 +204,7 @@ impl EndofuseApp {
         self.jobs.retrain_due_s = None;
         self.status
             .busy_with(Task::Train, "Training the forest…".into(), 0);
+        self.jobs.train_epoch = self.jobs.forest_epoch;
         self.send_job(Command::Train(self.forest_params()));
     }
 
@@ -200,18 +213,20 @@ impl EndofuseApp {
         if self.doc.appearance.is_none()
             || self.view.layer == Layer::Image
             || (self.jobs.probabilities.contains_key(&frame)
-                && self.jobs.probability_refresh != Some(frame))
+                && !self.jobs.probability_refresh.contains(&frame))
             || self.jobs.probability_asked.is_some()
         {
             return;
         }
-        self.jobs.probability_asked = Some(frame);
-        self.send_job(Command::Classify { frame });
+        self.jobs.probability_requests += 1;
+        let request = self.jobs.probability_requests;
+        self.jobs.probability_asked = Some((frame, request));
+        self.send_job(Command::Classify { frame, request });
     }
 
     /// True when the full probability maps of frame `t` from the current forest have arrived.
     pub fn has_probabilities(&self, t: usize) -> bool {
-        self.jobs.probabilities.contains_key(&t) && self.jobs.probability_refresh != Some(t)
+        self.jobs.probabilities.contains_key(&t) && !self.jobs.probability_refresh.contains(&t)
     }
 
     fn need_forest(&mut self) -> bool {
@@ -328,6 +343,9 @@ impl EndofuseApp {
                 self.status.error = None;
                 self.scene_loaded(scene, model);
             }
+            // A forest loaded or dropped after this Train was sent replaced it in the worker
+            // too: it is not the one in use.
+            Event::Trained(_) if self.jobs.train_epoch != self.jobs.forest_epoch => {}
             Event::Trained(a) => {
                 self.status.notify(format!(
                     "Forest trained on {} pixels in {:.2} s; checking it on strokes it did not learn…",
@@ -373,18 +391,25 @@ impl EndofuseApp {
                 frame,
                 maps,
                 coarse,
+                request,
             } => {
+                // Only the answer to the latest request: one queued under an earlier forest
+                // or for a frame left since is dropped.
+                if self.jobs.probability_asked != Some((frame, request)) {
+                    return;
+                }
                 if !coarse {
                     self.jobs.probability_asked = None;
                 }
                 if self.jobs.probabilities.len() > 8 {
                     self.jobs.probabilities.clear();
+                    self.jobs.probability_refresh.clear();
                 }
                 self.jobs.probabilities.insert(frame, maps);
                 if coarse {
-                    self.jobs.probability_refresh = Some(frame);
-                } else if self.jobs.probability_refresh == Some(frame) {
-                    self.jobs.probability_refresh = None;
+                    self.jobs.probability_refresh.insert(frame);
+                } else {
+                    self.jobs.probability_refresh.remove(&frame);
                 }
                 if frame == self.view.frame {
                     self.screen.textures.probability_key = None;
@@ -540,7 +565,11 @@ impl EndofuseApp {
             ));
         }
         match task {
-            Task::Classify => self.jobs.probability_asked = None,
+            // A classification that ended without its full maps (cancelled, failed) is asked
+            // again when the view needs it; a finished one cleared the request with its maps.
+            Task::Classify if !finished => self.jobs.probability_asked = None,
+            // Whatever became of it, no figure is coming.
+            Task::Validate => self.jobs.validating = false,
             Task::Load if !finished => {
                 self.jobs.pending_session = None;
                 self.jobs.loading_spec = None;

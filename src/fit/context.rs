@@ -45,11 +45,17 @@ impl<'a> FrameContext<'a> {
 }
 
 impl FrameContext<'_> {
-    /// k1 of camera `m` at focal length `fx` (px) by the scene's relation, if it gives one.
+    /// k1 of camera `m` at focal length `fx` (px) by the scene's relation, if it gives one:
+    /// the calibrated k1 moved by the relation's change from the calibrated focal length (each
+    /// lens keeps its own calibrated k1; the relation says how zoom changes it).
     pub fn k1_at(&self, m: usize, fx: f64) -> Option<f64> {
         let [c0, c1, c2] = self.k1_vs_focal?;
-        let inv = self.cameras.get(m)?.width as f64 / fx;
-        Some(c0 + c1 * inv + c2 * inv * inv)
+        let cam = self.cameras.get(m)?;
+        let rel = |fx: f64| {
+            let inv = cam.width as f64 / fx;
+            c0 + c1 * inv + c2 * inv * inv
+        };
+        Some(cam.intrinsics.k1 + rel(fx) - rel(cam.intrinsics.fx))
     }
 
     /// The structures with an image term (a forest class), in the order their render objects

@@ -320,6 +320,7 @@ impl<'a> FrameTracker<'a> {
             self.zoom.corrected(&self.good, &fit.state);
         }
         let mut refused = Vec::new();
+        let mut zoom_refused = false;
         if correct_cameras && !self.cameras_plausible(&fit.state) {
             // A runaway correction: the frame is fitted again with the cameras as they were.
             log::info!("frame {t}: camera correction refused (fx or fy/fx implausible)");
@@ -331,12 +332,16 @@ impl<'a> FrameTracker<'a> {
                 &options.params(phase, Zoom::PoseOnly),
             );
             correct_cameras = false;
+            // The pose alone followed whatever zoom this was.
+            zoom_refused = true;
             self.cancelled()?;
         }
         let (fit, lost) = self.placed_afresh_if_lost(t, views, fit, &mut refused);
         let depth_explains_zoom = !correct_cameras
             && !lost
-            && (in_zoom || (options.mode != Mode::LSC && self.size_changes_like_a_zoom(t, &fit)));
+            && (in_zoom
+                || zoom_refused
+                || (options.mode != Mode::LSC && self.size_changes_like_a_zoom(t, &fit)));
         // A lost frame keeps the last good state: nothing learnt from it.
         let state = if lost {
             self.motion.clear();
@@ -463,8 +468,12 @@ impl<'a> FrameTracker<'a> {
             s.affine
                 .apply(self.ctx.model_centre(&self.ctx.model.deformed(&s.shape)))
         };
+        // Only against a pose that was tracked (not the start, which may itself be the wrong
+        // guess), and more leeway the longer the organ was out of sight (per second lost).
         let jump = (centre(&again.state) - centre(&self.good)).length();
-        if jump > config.tracking.reinit_max_jump_mm {
+        let lost_s = (t.saturating_sub(self.good_frame)) as f64 / self.scene.fps.max(1.0);
+        let limit = config.tracking.reinit_max_jump_mm * (1.0 + lost_s);
+        if !self.first && jump > limit {
             log::info!("frame {t}: fresh placement {jump:.0} mm from the last good pose refused");
             refused.push(crate::scene::trajectory::PLACEMENT_REFUSED);
             return (fit, true);

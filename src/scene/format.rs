@@ -24,7 +24,8 @@ pub struct SceneFile {
     pub zoom_changes: Vec<[i64; 2]>,
     /// An extension of CONTRACT §2, optional: the lens's k1 as a function of focal length,
     /// k1 = c₀ + c₁/f + c₂/f² with f = fx / image width (the paper's §IV-A form). With it, LSC
-    /// sets k1 from its fx estimate; without it, LSC holds k1 at calibration (silhouettes
+    /// moves each camera's calibrated k1 by the relation's change from the calibrated fx to its
+    /// fx estimate; without it, LSC holds k1 at calibration (silhouettes
     /// barely see k1: left free it drifted to −1.3 on a zoom in and out, issue 14).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     /// (A list, checked in `load`, so a wrong length is named in words.)

@@ -331,9 +331,9 @@ pub struct TrackingConfig {
     /// camera correction: R, L, LS, or LSC outside a correction) reports its confidence times
     /// this: the fit may look right while the hidden structures are off by the depth error.
     pub depth_zoom_confidence: f64,
-    /// A fresh placement after lost frames whose model centre lands farther than this (mm)
-    /// from the last good frame's is refused, and the frame stays lost: an organ does not
-    /// jump centimetres in a few frames (one independent scene's re-placement landed 18 cm
+    /// A fresh placement after lost frames whose model centre lands farther than this (mm,
+    /// and as much again per second lost) from the last tracked frame's is refused, and the
+    /// frame stays lost: an organ does not jump centimetres in a few frames (one independent scene's re-placement landed 18 cm
     /// off and was taken, issue 14).
     pub reinit_max_jump_mm: f64,
     /// Camera correction is refused (the frame refitted with the cameras as before) where it
