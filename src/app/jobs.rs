@@ -51,6 +51,16 @@ pub struct Jobs {
     pub config: crate::fit::FitConfig,
 }
 
+impl Jobs {
+    /// Another forest or scene: no maps, request or held-out figure of the earlier one stays.
+    fn forget_maps(&mut self) {
+        self.probabilities.clear();
+        self.probability_refresh.clear();
+        self.probability_asked = None;
+        self.validating = false;
+    }
+}
+
 /// (width, height) of every camera of a scene.
 pub(super) fn camera_sizes(scene: &Scene) -> Vec<(usize, usize)> {
     scene
@@ -112,10 +122,7 @@ impl EndofuseApp {
         self.view.transform = None;
         self.view.layer = Layer::Image;
         doc.appearance = None;
-        self.jobs.probabilities.clear();
-        self.jobs.probability_asked = None;
-        self.jobs.probability_refresh.clear();
-        self.jobs.validating = false;
+        self.jobs.forget_maps();
         self.jobs.forest_epoch += 1;
         doc.placement = scene.initial_pose;
         doc.results.clear();
@@ -165,14 +172,11 @@ impl EndofuseApp {
             .flatten();
         self.doc.appearance = forest;
         self.doc.touch();
-        self.jobs.validating = false;
-        self.jobs.probabilities.clear();
-        self.jobs.probability_refresh.clear();
+        self.jobs.forget_maps();
         if let Some(maps) = keep {
             self.jobs.probabilities.insert(frame, maps);
             self.jobs.probability_refresh.insert(frame);
         }
-        self.jobs.probability_asked = None;
         self.screen.textures.probability_key = None;
     }
 

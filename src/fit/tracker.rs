@@ -465,8 +465,8 @@ impl<'a> FrameTracker<'a> {
         // A placement is a guess from one frame; one that puts the organ centimetres from
         // where it was a few frames ago found something else.
         let centre = |s: &FitState| {
-            s.affine
-                .apply(self.ctx.model_centre(&self.ctx.model.deformed(&s.shape)))
+            self.ctx
+                .rotation_centre(s, &self.ctx.model.deformed(&s.shape))
         };
         // Only against a pose that was tracked (not the start, which may itself be the wrong
         // guess), and more leeway the longer the organ was out of sight (per second lost).
