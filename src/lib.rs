@@ -10,6 +10,7 @@ pub mod classify;
 pub mod ctimport;
 pub mod error;
 pub mod export;
+pub mod experiments;
 pub mod fit;
 pub mod geometry;
 pub mod info;

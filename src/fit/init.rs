@@ -178,7 +178,7 @@ pub fn automatic_pose(
             shape: vec![0.0; model.shape.mode_count()],
             intrinsics: scene.cameras.iter().map(|c| c.intrinsics).collect(),
         };
-        let fit = fit_frame(&ctx, &start, &start, &mut views, appearance, &params);
+        let fit = fit_frame(&ctx, &start, &start, &mut views, Some(appearance), &params);
         if best.as_ref().is_none_or(|(c, _)| fit.confidence > *c) {
             best = Some((fit.confidence, fit.state.affine));
         }

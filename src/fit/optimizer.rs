@@ -266,7 +266,7 @@ pub fn fit_frame(
     start: &FitState,
     prev: &FitState,
     views: &mut [ViewProbabilities],
-    appearance: &Appearance,
+    appearance: Option<&Appearance>,
     params: &FitParams,
 ) -> FrameFit {
     let mut state = start.clone();
@@ -278,6 +278,9 @@ pub fn fit_frame(
     }];
     if matches!(params.mode, Mode::LS | Mode::LSC) && ctx.model.shape.mode_count() > 0 {
         blocks.push(Block::Shape);
+    }
+    if params.hold_pose {
+        blocks.retain(|&b| b == Block::Shape);
     }
     if params.correct_cameras {
         // Zooming in and moving closer look alike in one frame: during a zoom the cameras go

@@ -77,7 +77,7 @@ impl ViewProbabilities {
     ) -> Self {
         let k = class_labels.len();
         let other = (1.0 - confidence) / (k.max(2) - 1) as f32;
-        let mut probs: Vec<f32> = labels
+        let probs: Vec<f32> = labels
             .data
             .iter()
             .flat_map(|&l| {
@@ -85,7 +85,22 @@ impl ViewProbabilities {
                 (0..k).map(move |j| if j == c { confidence } else { other })
             })
             .collect();
-        let (mut w, mut h) = (labels.width, labels.height);
+        Self::from_planes(probs, labels.width, labels.height, k, levels)
+    }
+
+    /// Probabilities given whole for every pixel of level 0 (`classes` values per pixel,
+    /// row-major), e.g. from an image model instead of the forest; coarser levels average
+    /// 2×2 blocks. Nothing is ever classified: [`ViewProbabilities::ensure`] finds every pixel
+    /// known.
+    pub fn from_planes(
+        mut probs: Vec<f32>,
+        width: usize,
+        height: usize,
+        classes: usize,
+        levels: usize,
+    ) -> Self {
+        let k = classes;
+        let (mut w, mut h) = (width, height);
         let mut out = Vec::new();
         let mut sizes = Vec::new();
         for l in 0..levels.max(1) {
@@ -136,7 +151,9 @@ impl ViewProbabilities {
     }
 
     /// Classifies the listed pixel indices of `level` that are not known yet.
-    pub fn ensure(&mut self, appearance: &Appearance, level: usize, pixels: &[u32]) {
+    /// Without a forest (`None`: the probabilities were given whole) a pixel left unknown is
+    /// a caller's error: it counts as undecided (equal probabilities), and debug builds stop.
+    pub fn ensure(&mut self, appearance: Option<&Appearance>, level: usize, pixels: &[u32]) {
         let k = self.classes;
         let (w, h) = self.sizes[level];
         if self.levels[level].probs.is_empty() {
@@ -156,6 +173,14 @@ impl ViewProbabilities {
         }
         missing.sort_unstable();
         missing.dedup();
+        let Some(appearance) = appearance else {
+            debug_assert!(false, "probabilities given whole, yet {} pixels unknown", missing.len());
+            let lv = &mut self.levels[level];
+            for &i in &missing {
+                lv.probs[i as usize * k..(i as usize + 1) * k].fill(1.0 / k as f32);
+            }
+            return;
+        };
         let image = self.image(level);
         let lv = &mut self.levels[level];
         // Features over a region around the requested pixels only; grown (rarely: the model

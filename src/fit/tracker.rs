@@ -131,7 +131,7 @@ fn mask_occluders(
         .filter(|&i| labels.data[i] != 0 && inside.data[i] >= margin * margin)
         .collect();
     let pixels: Vec<u32> = candidates.iter().map(|&i| coarse(i)).collect();
-    view.ensure(appearance, level, &pixels);
+    view.ensure(Some(appearance), level, &pixels);
     for (&i, &c) in candidates.iter().zip(&pixels) {
         if view.get(level, c, 0) > tracking.occluder_background {
             labels.data[i] = 0;
@@ -267,7 +267,7 @@ impl<'a> FrameTracker<'a> {
         anchor: &FitState,
         params: &FitParams,
     ) -> FrameFit {
-        fit_frame(&self.ctx, anchor, anchor, views, self.appearance, params)
+        fit_frame(&self.ctx, anchor, anchor, views, Some(self.appearance), params)
     }
 
     fn is_lost(&self, fit: &FrameFit) -> bool {
@@ -612,7 +612,7 @@ mod tests {
             &start,
             &start,
             &mut views,
-            &appearance,
+            Some(&appearance),
             &options.params(Phase::FirstFrame, Zoom::Off),
         );
         let after = render_state(&scene, &model, &fit.state);

@@ -16,6 +16,10 @@ pub struct FitParams {
     pub mode: Mode,
     /// Whether the π block runs (LSC inside a zoom change).
     pub correct_cameras: bool,
+    /// The pose stays where it starts: only the shape (and camera) blocks move. Never set by
+    /// tracking; the paper's shape-recovery experiment (§IV-A, Fig. 6) fixes the pose.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub hold_pose: bool,
     /// Pyramid levels visited, coarse to fine.
     pub levels: Vec<usize>,
     /// T → W → π rounds per level.
@@ -54,6 +58,7 @@ impl FitConfig {
         let mut p = FitParams {
             mode,
             correct_cameras: false,
+            hold_pose: false,
             levels: Vec::new(),
             rounds: 0,
             steps: 0,

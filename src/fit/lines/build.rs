@@ -18,7 +18,7 @@ impl FrameContext<'_> {
         &self,
         state: &FitState,
         views: &mut [ViewProbabilities],
-        appearance: &Appearance,
+        appearance: Option<&Appearance>,
         params: &EnergyParams,
     ) -> Vec<Line> {
         self.build_lines_and_rasters(state, views, appearance, params)
@@ -32,7 +32,7 @@ impl FrameContext<'_> {
         &self,
         state: &FitState,
         views: &mut [ViewProbabilities],
-        appearance: &Appearance,
+        appearance: Option<&Appearance>,
         params: &EnergyParams,
     ) -> (Vec<Line>, Vec<ViewRaster>) {
         let deformed = self.model.deformed(&state.shape);

@@ -398,7 +398,7 @@ mod tests {
                 level,
                 ..EnergyParams::default()
             };
-            let lines = ctx.build_lines(&state, &mut views, &appearance, &ep);
+            let lines = ctx.build_lines(&state, &mut views, Some(&appearance), &ep);
             assert!(lines.len() > 40, "level {level}: {} lines", lines.len());
             assert!(
                 lines.iter().any(|l| l.view == 1) && lines.iter().any(|l| l.structure == 1),

@@ -269,7 +269,7 @@ pub fn measure(
     ctx: &FrameContext,
     state: &FitState,
     views: &mut [ViewProbabilities],
-    appearance: &Appearance,
+    appearance: Option<&Appearance>,
     level: usize,
     raster: Option<&ViewRaster>,
     params: &StereoParams,
