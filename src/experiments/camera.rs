@@ -106,7 +106,7 @@ mod tests {
         assert!((a.fx - b.fx).abs() < 1e-9 && (a.cx - b.cx).abs() < 1e-9);
         assert!((mid.fx / a.fx - (1.0 + ZOOM_PEAK)).abs() < 1e-9);
         assert!((mid.cx - a.cx - CX_DRIFT_PX).abs() < 1e-9);
-        assert!((mid.k1 - k1_of(mid.fx, 320.0)).abs() < 1e-12);
+        assert!((mid.k1 - k1_of(mid.fx, super::super::rig::WIDTH_PX as f64)).abs() < 1e-12);
         assert!(mid.k1 > a.k1);
     }
 }

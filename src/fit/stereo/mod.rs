@@ -123,7 +123,7 @@ mod tests {
             &ctx,
             state,
             &mut views,
-            appearance,
+            Some(appearance),
             0,
             None,
             &StereoParams::default(),
