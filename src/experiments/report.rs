@@ -171,8 +171,7 @@ pub fn markdown(res: &Results) -> String {
         s,
         "Ours: mode LS (affine + shape), started {}° and {} mm from the truth in a random direction per trial. \
          Chan–Vese: the project's implementation of the paper's [37] (two phases — one structure —, μ = {}, \
-         λ₁ = λ₂ = 1, Δt = {}, a checkerboard start, at most {} iterations, φ reset to a signed distance every {:?} \
-         iterations), on each view's image alone, the brighter phase taken as the kidney. Dice per view against the \
+         λ₁ = λ₂ = 1, Δt = {}, a checkerboard start, at most {} iterations, φ reset to a signed distance {}), on each view's image alone, the brighter phase taken as the kidney. Dice per view against the \
          noise-free silhouette, mean ± SD over views and {} trial(s). The paper gives Fig. 4 as a plot only: ACWOE \
          \"performed slightly better\" at low noise and \"fails in presence of high noise\"; ours stays high.\n",
         super::noise::START_OFFSET_DEG,
@@ -180,7 +179,10 @@ pub fn markdown(res: &Results) -> String {
         g.noise.chan_vese.mu,
         g.noise.chan_vese.dt,
         g.noise.chan_vese.max_iterations,
-        g.noise.chan_vese.reinit_every,
+        match g.noise.chan_vese.reinit_every {
+            Some(k) if k > 0 => format!("every {k} iterations"),
+            _ => "never".to_string(),
+        },
         g.noise.trials
     );
     let mut keys: Vec<(&str, usize)> = res.noise.iter().map(|r| (r.method, r.views)).collect();
