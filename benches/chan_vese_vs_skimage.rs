@@ -67,7 +67,12 @@ fn main() {
             .expect("mask size");
         let ours = segment(&img.intensity, img.width, img.height, &skimage_setting);
         let t = std::time::Instant::now();
-        let exp = segment(&img.intensity, img.width, img.height, &ChanVeseParams::default());
+        let exp = segment(
+            &img.intensity,
+            img.width,
+            img.height,
+            &ChanVeseParams::default(),
+        );
         let exp_s = t.elapsed().as_secs_f64();
         let agree = dice(&ours.inside, &sk).unwrap_or(1.0);
         // Which phase is the kidney depends on the start only: compare the brighter phase.

@@ -92,6 +92,12 @@ pub fn export_results(
     recorder.config = config;
     for r in results {
         let rendered = crate::fit::tracker::render_state(scene, model, &r.state);
+        let hidden_regions = r.hidden_regions(&rendered.centroids);
+        let region_masks = crate::fit::tracker::region_masks(
+            &crate::fit::tracker::cameras_of(scene, &r.state),
+            &rendered.hidden,
+            &hidden_regions,
+        );
         recorder.record(&TrackedFrame {
             frame: r.frame,
             state: r.state.clone(),
@@ -109,6 +115,8 @@ pub fn export_results(
             labels: rendered.labels,
             hidden: rendered.hidden,
             centroids: rendered.centroids,
+            hidden_regions,
+            region_masks,
         })?;
     }
     let metrics = recorder.finish(forest_train_s)?;

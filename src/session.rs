@@ -64,6 +64,31 @@ pub struct FrameResult {
     /// `placement_refused`; see [`crate::fit::tracker::TrackedFrame::refused`]).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub refused: Vec<String>,
+    /// Where each hidden structure could be (as trajectory.json's `hidden_region`).
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub hidden_region: BTreeMap<String, crate::scene::trajectory::HiddenRegionEntry>,
+}
+
+impl FrameResult {
+    /// The hidden regions of this result about the centroids of its state (`centroids` as
+    /// [`crate::fit::tracker::render_state`] gives them).
+    pub fn hidden_regions(
+        &self,
+        centroids: &[(String, glam::DVec3)],
+    ) -> Vec<crate::fit::hidden_region::HiddenRegion> {
+        self.hidden_region
+            .iter()
+            .filter_map(|(name, e)| {
+                let (_, c) = centroids.iter().find(|(n, _)| n == name)?;
+                Some(crate::fit::hidden_region::HiddenRegion {
+                    structure: name.clone(),
+                    centroid_mm: *c,
+                    covariance_mm2: e.centroid_cov_mm2,
+                    radius_mm: e.radius95_mm,
+                })
+            })
+            .collect()
+    }
 }
 
 /// One painted view and frame, run-length coded: (run length, seed value).

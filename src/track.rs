@@ -30,6 +30,12 @@ pub struct HiddenMetrics {
     pub dice_mean: Option<f64>,
     pub centroid_error_mm_mean: f64,
     pub centroid_error_mm_max: f64,
+    /// Share of frames whose true centroid lies inside the 95 % region (`hidden_region`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub coverage95: Option<f64>,
+    /// Median radius of the 95 % region over frames (mm).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub radius95_mm_median: Option<f64>,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -196,6 +202,8 @@ pub struct Recorder<'a> {
     all_dice: Vec<f64>,
     hidden_dice: BTreeMap<String, Vec<f64>>,
     centroid_err: BTreeMap<String, Vec<f64>>,
+    /// Per hidden structure: each frame's region radius and whether it held the truth.
+    region: BTreeMap<String, Vec<(f64, bool)>>,
     fx_err: Vec<f64>,
     cx_err: Vec<f64>,
     cy_err: Vec<f64>,
@@ -226,6 +234,7 @@ impl<'a> Recorder<'a> {
             all_dice: Vec::new(),
             hidden_dice: BTreeMap::new(),
             centroid_err: BTreeMap::new(),
+            region: BTreeMap::new(),
             fx_err: Vec::new(),
             cx_err: Vec::new(),
             cy_err: Vec::new(),
@@ -258,6 +267,12 @@ impl<'a> Recorder<'a> {
             for (name, masks) in &f.hidden {
                 write_mask(
                     &out.join(format!("hidden/{name}/{}/{t:06}.png", cam.name)),
+                    &masks[c],
+                )?;
+            }
+            for (name, masks) in &f.region_masks {
+                write_mask(
+                    &out.join(format!("hidden_region/{name}/{}/{t:06}.png", cam.name)),
                     &masks[c],
                 )?;
             }
@@ -309,6 +324,14 @@ impl<'a> Recorder<'a> {
             .as_ref()
             .and_then(|g| g.get(t))
         {
+            for r in &f.hidden_regions {
+                if let Some(tc) = truth.centroids.get(&r.structure) {
+                    self.region
+                        .entry(r.structure.clone())
+                        .or_default()
+                        .push((r.radius_mm, r.holds(glam::DVec3::from_array(*tc))));
+                }
+            }
             for (name, c) in &f.centroids {
                 if let Some(tc) = truth.centroids.get(name) {
                     self.centroid_err
@@ -352,6 +375,11 @@ impl<'a> Recorder<'a> {
                 .chain(f.refused.iter().copied())
                 .map(String::from)
                 .collect(),
+            hidden_region: f
+                .hidden_regions
+                .iter()
+                .map(|r| (r.structure.clone(), r.entry()))
+                .collect(),
         });
         Ok(())
     }
@@ -376,6 +404,17 @@ impl<'a> Recorder<'a> {
                         dice_mean: self.hidden_dice.get(name).map(|v| mean(v)),
                         centroid_error_mm_mean: mean(errs),
                         centroid_error_mm_max: errs.iter().cloned().fold(0.0, f64::max),
+                        coverage95: self.region.get(name).filter(|r| !r.is_empty()).map(|r| {
+                            r.iter().filter(|(_, inside)| *inside).count() as f64 / r.len() as f64
+                        }),
+                        radius95_mm_median: self.region.get(name).filter(|r| !r.is_empty()).map(
+                            |r| {
+                                percentile(
+                                    &r.iter().map(|(radius, _)| *radius).collect::<Vec<_>>(),
+                                    0.5,
+                                )
+                            },
+                        ),
                     },
                 )
             })

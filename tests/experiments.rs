@@ -71,7 +71,14 @@ fn quick_experiments_write_every_output_and_reproduce_the_papers_findings() {
     }
     let noise = read_csv(
         &out.join("noise.csv"),
-        &["sigma", "views", "method", "dice_mean", "dice_std", "trials"],
+        &[
+            "sigma",
+            "views",
+            "method",
+            "dice_mean",
+            "dice_std",
+            "trials",
+        ],
     );
     let at = |sigma: f64, method: &str| {
         noise
@@ -80,13 +87,31 @@ fn quick_experiments_write_every_output_and_reproduce_the_papers_findings() {
             .map(|r| num(r, "dice_mean"))
             .unwrap_or_else(|| panic!("no {method} row at σ {sigma}"))
     };
-    assert!(at(1.75, "ours") > 0.9, "ours at σ 1.75: {}", at(1.75, "ours"));
-    assert!(at(1.75, "chan_vese") < 0.6, "Chan–Vese at σ 1.75: {}", at(1.75, "chan_vese"));
-    assert!(at(0.25, "chan_vese") > 0.95, "Chan–Vese at σ 0.25: {}", at(0.25, "chan_vese"));
+    assert!(
+        at(1.75, "ours") > 0.9,
+        "ours at σ 1.75: {}",
+        at(1.75, "ours")
+    );
+    assert!(
+        at(1.75, "chan_vese") < 0.6,
+        "Chan–Vese at σ 1.75: {}",
+        at(1.75, "chan_vese")
+    );
+    assert!(
+        at(0.25, "chan_vese") > 0.95,
+        "Chan–Vese at σ 0.25: {}",
+        at(0.25, "chan_vese")
+    );
 
     let shape = read_csv(
         &out.join("shape.csv"),
-        &["sigma", "views", "perturbation_sd", "recovered", "vertex_rmse_mm"],
+        &[
+            "sigma",
+            "views",
+            "perturbation_sd",
+            "recovered",
+            "vertex_rmse_mm",
+        ],
     );
     for r in &shape {
         assert!(["0", "1"].contains(&r["recovered"].as_str()), "{r:?}");
@@ -94,7 +119,9 @@ fn quick_experiments_write_every_output_and_reproduce_the_papers_findings() {
     }
     let camera = read_csv(
         &out.join("camera.csv"),
-        &["frame", "camera", "fx_true", "fx_est", "cx_true", "cx_est", "k1_true", "k1_est"],
+        &[
+            "frame", "camera", "fx_true", "fx_est", "cx_true", "cx_est", "k1_true", "k1_est",
+        ],
     );
     for r in &camera {
         let rel = (num(r, "fx_est") / num(r, "fx_true") - 1.0).abs();
@@ -102,11 +129,20 @@ fn quick_experiments_write_every_output_and_reproduce_the_papers_findings() {
     }
     // The zoom is there: fx moves by more than 10 % over the sequence.
     let fx: Vec<f64> = camera.iter().map(|r| num(r, "fx_true")).collect();
-    let (lo, hi) = fx.iter().fold((f64::MAX, f64::MIN), |(a, b), &v| (a.min(v), b.max(v)));
+    let (lo, hi) = fx
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(a, b), &v| (a.min(v), b.max(v)));
     assert!(hi / lo > 1.1);
     let modes = read_csv(
         &out.join("modes.csv"),
-        &["scene", "mode", "dice_mean", "dice_p25", "dice_p75", "hidden_centroid_mm"],
+        &[
+            "scene",
+            "mode",
+            "dice_mean",
+            "dice_p25",
+            "dice_p75",
+            "hidden_centroid_mm",
+        ],
     );
     let found: Vec<&str> = modes.iter().map(|r| r["mode"].as_str()).collect();
     for m in ["R", "L", "LS", "LSC"] {
@@ -126,7 +162,14 @@ fn quick_experiments_write_every_output_and_reproduce_the_papers_findings() {
         assert!(non_white > 10_000, "{png}.png is nearly blank");
     }
     let report = std::fs::read_to_string(out.join("report.md")).unwrap();
-    for heading in ["Table IV", "Fig. 4", "Fig. 6", "Fig. 7", "Fig. 10b", "What differs"] {
+    for heading in [
+        "Table IV",
+        "Fig. 4",
+        "Fig. 6",
+        "Fig. 7",
+        "Fig. 10b",
+        "What differs",
+    ] {
         assert!(report.contains(heading), "report.md lacks {heading}");
     }
     // The paper's Table IV stands beside ours.

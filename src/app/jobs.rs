@@ -445,6 +445,11 @@ impl EndofuseApp {
                     hidden_error_mm: self.hidden_errors(&f),
                     depth_explains_zoom: f.depth_explains_zoom,
                     refused: f.refused.iter().map(|w| w.to_string()).collect(),
+                    hidden_region: f
+                        .hidden_regions
+                        .iter()
+                        .map(|r| (r.structure.clone(), r.entry()))
+                        .collect(),
                 };
                 if self.view.follow_tracking {
                     self.view.frame = f.frame;

@@ -102,7 +102,11 @@ mod tests {
     /// The zoom starts and ends at the calibration, peaks mid-way, and k1 follows the law.
     #[test]
     fn the_zoom_goes_in_and_back_out() {
-        let (a, mid, b) = (intrinsics_at(0, 21), intrinsics_at(10, 21), intrinsics_at(20, 21));
+        let (a, mid, b) = (
+            intrinsics_at(0, 21),
+            intrinsics_at(10, 21),
+            intrinsics_at(20, 21),
+        );
         assert!((a.fx - b.fx).abs() < 1e-9 && (a.cx - b.cx).abs() < 1e-9);
         assert!((mid.fx / a.fx - (1.0 + ZOOM_PEAK)).abs() < 1e-9);
         assert!((mid.cx - a.cx - CX_DRIFT_PX).abs() < 1e-9);

@@ -80,7 +80,9 @@ pub fn segment(intensity: &[f32], width: usize, height: usize, p: &ChanVeseParam
     // Scaled to [0, 1] as scikit-image does.
     let (lo, hi) = intensity
         .iter()
-        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
     let span = if hi > lo { (hi - lo) as f64 } else { 1.0 };
     let img: Vec<f64> = intensity.iter().map(|&v| (v - lo) as f64 / span).collect();
     // Checkerboard start: sin(πx/5)·sin(πy/5).
@@ -99,9 +101,17 @@ pub fn segment(intensity: &[f32], width: usize, height: usize, p: &ChanVeseParam
         (c1, c2) = averages(&img, &phi);
         update_rows(&phi, &mut next, &img, width, height, (c1, c2), p);
         iterations += 1;
-        let change = (next.iter().zip(&phi).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / n as f64).sqrt();
+        let change = (next
+            .iter()
+            .zip(&phi)
+            .map(|(a, b)| (a - b).powi(2))
+            .sum::<f64>()
+            / n as f64)
+            .sqrt();
         std::mem::swap(&mut phi, &mut next);
-        if p.reinit_every.is_some_and(|k| k > 0 && iterations.is_multiple_of(k)) {
+        if p.reinit_every
+            .is_some_and(|k| k > 0 && iterations.is_multiple_of(k))
+        {
             reinitialise(&mut phi, width, height);
             // Reset φ moves by more than the tolerance every time: converged instead when the
             // segmentation itself stands still (fewer than 1 pixel in 10⁴ changed since the
@@ -244,7 +254,10 @@ mod tests {
             );
             let d = dice(&seg.brighter(), &truth).unwrap();
             assert!(d > 0.97, "reinit {reinit:?}: Dice {d}");
-            let (bright, dark) = (seg.c_inside.max(seg.c_outside), seg.c_inside.min(seg.c_outside));
+            let (bright, dark) = (
+                seg.c_inside.max(seg.c_outside),
+                seg.c_inside.min(seg.c_outside),
+            );
             assert!(bright - dark > 0.3, "means {bright} {dark}");
         }
     }
@@ -253,7 +266,11 @@ mod tests {
     #[test]
     fn reinitialisation_keeps_the_contour() {
         let truth = disc(40, 30);
-        let mut phi: Vec<f64> = truth.data.iter().map(|&v| if v { 3.0 } else { -0.2 }).collect();
+        let mut phi: Vec<f64> = truth
+            .data
+            .iter()
+            .map(|&v| if v { 3.0 } else { -0.2 })
+            .collect();
         reinitialise(&mut phi, 40, 30);
         let kept = truth.data.iter().zip(&phi).all(|(&v, &f)| v == (f > 0.0));
         assert!(kept);

@@ -55,7 +55,13 @@ impl Grid {
             Grid {
                 pose: pose_range::PoseRangeSetup {
                     views: vec![1, 4],
-                    params: vec![Param::ThetaX, Param::ThetaY, Param::ThetaZ, Param::Sx, Param::Sy],
+                    params: vec![
+                        Param::ThetaX,
+                        Param::ThetaY,
+                        Param::ThetaZ,
+                        Param::Sx,
+                        Param::Sy,
+                    ],
                     sigma: 0.75,
                     trials: 1,
                     bisections: 1,
@@ -158,7 +164,10 @@ impl Progress {
         if let Ok(mut s) = self.stage.lock() {
             *s = (name.to_string(), tasks, Instant::now(), Instant::now());
         }
-        eprintln!("experiments: [{k}/{}] {name}: {tasks} tasks", self.total_stages);
+        eprintln!(
+            "experiments: [{k}/{}] {name}: {tasks} tasks",
+            self.total_stages
+        );
     }
 
     pub fn done(&self, n: usize) {
@@ -321,7 +330,9 @@ pub struct Results {
 pub fn run(options: &ExperimentOptions) -> Result<Results, Error> {
     let out = &options.out;
     if out.exists() && !out.is_dir() {
-        return Err(crate::error::InputError::new(out, "--out names a file; it must be a folder").into());
+        return Err(
+            crate::error::InputError::new(out, "--out names a file; it must be a folder").into(),
+        );
     }
     std::fs::create_dir_all(out).map_err(|source| Error::Write {
         path: out.clone(),

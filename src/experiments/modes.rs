@@ -78,7 +78,11 @@ pub fn run(setup: &ModesSetup, work: &Path, progress: &Progress) -> Result<Vec<M
             )?;
             // Best effort: the outputs are only the means to the figures.
             let _ = std::fs::remove_dir_all(&out);
-            let per_frame = m.dice.as_ref().map(|d| d.per_frame.clone()).unwrap_or_default();
+            let per_frame = m
+                .dice
+                .as_ref()
+                .map(|d| d.per_frame.clone())
+                .unwrap_or_default();
             let hidden = m
                 .hidden
                 .values()

@@ -68,7 +68,8 @@ fn draw_png(
         draw(&root).map_err(|e| plot_error(path, e))?;
         root.present().map_err(|e| plot_error(path, e))?;
     }
-    let img = image::RgbImage::from_raw(W, H, buf).ok_or_else(|| plot_error(path, "buffer size"))?;
+    let img =
+        image::RgbImage::from_raw(W, H, buf).ok_or_else(|| plot_error(path, "buffer size"))?;
     img.save(path).map_err(|e| plot_error(path, e))
 }
 
@@ -88,9 +89,17 @@ pub fn pose_range(path: &Path, rows: &[Range]) -> Result<(), Error> {
         ))
         .map_err(s)?;
         let kinds: Vec<(&str, &[Param], bool)> = [
-            ("rotation (degrees)", &[Param::ThetaX, Param::ThetaY, Param::ThetaZ][..], false),
+            (
+                "rotation (degrees)",
+                &[Param::ThetaX, Param::ThetaY, Param::ThetaZ][..],
+                false,
+            ),
             ("scale factor (log axis)", &[Param::Sx, Param::Sy][..], true),
-            ("translation (mm)", &[Param::Tx, Param::Ty, Param::Tz][..], false),
+            (
+                "translation (mm)",
+                &[Param::Tx, Param::Ty, Param::Tz][..],
+                false,
+            ),
         ]
         .into_iter()
         .filter(|(_, params, _)| rows.iter().any(|r| params.contains(&r.param)))
@@ -167,7 +176,11 @@ pub fn pose_range(path: &Path, rows: &[Range]) -> Result<(), Error> {
                     .configure_mesh()
                     .y_labels(of.len() * 2 + 1)
                     .y_label_formatter(&label_of)
-                    .x_desc(if params.contains(&Param::Tx) { "mm" } else { "degrees" })
+                    .x_desc(if params.contains(&Param::Tx) {
+                        "mm"
+                    } else {
+                        "degrees"
+                    })
                     .draw()
                     .map_err(s)?;
                 bars!(chart);
@@ -181,7 +194,10 @@ pub fn pose_range(path: &Path, rows: &[Range]) -> Result<(), Error> {
 pub fn noise(path: &Path, rows: &[NoiseRow]) -> Result<(), Error> {
     draw_png(path, |root| {
         let mut chart = ChartBuilder::on(root)
-            .caption("Fig. 4: Dice vs noise, ours vs Chan-Vese (ACWOE)", (FONT, 22))
+            .caption(
+                "Fig. 4: Dice vs noise, ours vs Chan-Vese (ACWOE)",
+                (FONT, 22),
+            )
             .margin(15)
             .x_label_area_size(45)
             .y_label_area_size(60)
@@ -209,15 +225,24 @@ pub fn noise(path: &Path, rows: &[NoiseRow]) -> Result<(), Error> {
                 c.stroke_width(2)
             };
             chart
-                .draw_series(LineSeries::new(pts.iter().map(|r| (r.sigma, r.dice_mean)), style))
+                .draw_series(LineSeries::new(
+                    pts.iter().map(|r| (r.sigma, r.dice_mean)),
+                    style,
+                ))
                 .map_err(s)?
                 .label(format!(
                     "{} ({} view{})",
-                    if *method == "ours" { "ours" } else { "Chan-Vese" },
+                    if *method == "ours" {
+                        "ours"
+                    } else {
+                        "Chan-Vese"
+                    },
                     views,
                     if *views == 1 { "" } else { "s" }
                 ))
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(3)));
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(3))
+                });
             chart
                 .draw_series(pts.iter().map(|r| {
                     PathElement::new(
@@ -230,7 +255,10 @@ pub fn noise(path: &Path, rows: &[NoiseRow]) -> Result<(), Error> {
                 }))
                 .map_err(s)?;
             chart
-                .draw_series(pts.iter().map(|r| Circle::new((r.sigma, r.dice_mean), 4, c.filled())))
+                .draw_series(
+                    pts.iter()
+                        .map(|r| Circle::new((r.sigma, r.dice_mean), 4, c.filled())),
+                )
                 .map_err(s)?;
         }
         chart
@@ -254,7 +282,10 @@ pub fn shape(path: &Path, rows: &[ShapeRow]) -> Result<(), Error> {
         .fold(1.0f64, f64::max);
     draw_png(path, |root| {
         let mut chart = ChartBuilder::on(root)
-            .caption("Fig. 6: tolerable shape perturbation (pose fixed)", (FONT, 22))
+            .caption(
+                "Fig. 6: tolerable shape perturbation (pose fixed)",
+                (FONT, 22),
+            )
             .margin(15)
             .x_label_area_size(45)
             .y_label_area_size(60)
@@ -270,13 +301,19 @@ pub fn shape(path: &Path, rows: &[ShapeRow]) -> Result<(), Error> {
         views.sort();
         views.dedup();
         for (k, v) in views.iter().enumerate() {
-            let pts: Vec<(f64, f64)> = tol.iter().filter(|t| t.1 == *v).map(|t| (t.0, t.2)).collect();
+            let pts: Vec<(f64, f64)> = tol
+                .iter()
+                .filter(|t| t.1 == *v)
+                .map(|t| (t.0, t.2))
+                .collect();
             let c = colour(k);
             chart
                 .draw_series(LineSeries::new(pts.clone(), c.stroke_width(3)))
                 .map_err(s)?
                 .label(format!("{v} view{}", if *v == 1 { "" } else { "s" }))
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(3)));
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(3))
+                });
             chart
                 .draw_series(pts.iter().map(|&p| Circle::new(p, 5, c.filled())))
                 .map_err(s)?;
@@ -309,9 +346,15 @@ fn series_panel(
         .collect();
     let (lo, hi) = ys
         .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
     let pad = ((hi - lo) * 0.1).max(1e-3);
-    let (lo, hi) = if lo.is_finite() { (lo - pad, hi + pad) } else { (0.0, 1.0) };
+    let (lo, hi) = if lo.is_finite() {
+        (lo - pad, hi + pad)
+    } else {
+        (0.0, 1.0)
+    };
     let mut chart = ChartBuilder::on(area)
         .caption(title, (FONT, 18))
         .margin(10)
@@ -354,8 +397,12 @@ pub fn camera(path: &Path, rows: &[CameraRow]) -> Result<(), Error> {
     let cam0: Vec<&CameraRow> = rows.iter().filter(|r| r.camera == 0).collect();
     let pick = |f: fn(&crate::geometry::Intrinsics) -> f64| {
         (
-            cam0.iter().map(|r| (r.frame as f64, f(&r.truth))).collect::<Vec<_>>(),
-            cam0.iter().map(|r| (r.frame as f64, f(&r.estimate))).collect::<Vec<_>>(),
+            cam0.iter()
+                .map(|r| (r.frame as f64, f(&r.truth)))
+                .collect::<Vec<_>>(),
+            cam0.iter()
+                .map(|r| (r.frame as f64, f(&r.estimate)))
+                .collect::<Vec<_>>(),
         )
     };
     let (fx_t, fx_e) = pick(|k| k.fx);
@@ -369,13 +416,19 @@ pub fn camera(path: &Path, rows: &[CameraRow]) -> Result<(), Error> {
             &panels[0],
             "Fig. 7: focal length (camera 0)",
             "px",
-            &[("fx", fx_t.clone(), fx_e.clone()), ("fy", fy_t.clone(), fy_e.clone())],
+            &[
+                ("fx", fx_t.clone(), fx_e.clone()),
+                ("fy", fy_t.clone(), fy_e.clone()),
+            ],
         )?;
         series_panel(
             &panels[1],
             "principal point (camera 0)",
             "px",
-            &[("cx", cx_t.clone(), cx_e.clone()), ("cy", cy_t.clone(), cy_e.clone())],
+            &[
+                ("cx", cx_t.clone(), cx_e.clone()),
+                ("cy", cy_t.clone(), cy_e.clone()),
+            ],
         )?;
         series_panel(
             &panels[2],
@@ -423,7 +476,11 @@ pub fn modes(path: &Path, rows: &[ModeRow]) -> Result<(), Error> {
         .map(|s| s.1[0])
         .filter(|v| v.is_finite())
         .fold(1.0f64, f64::min);
-    let h_max = stats.iter().map(|s| s.2).filter(|v| v.is_finite()).fold(1.0f64, f64::max);
+    let h_max = stats
+        .iter()
+        .map(|s| s.2)
+        .filter(|v| v.is_finite())
+        .fold(1.0f64, f64::max);
     draw_png(path, |root| {
         let panels = root.split_evenly((1, 2));
         let names: Vec<String> = stats.iter().map(|s| s.0.clone()).collect();
@@ -436,7 +493,10 @@ pub fn modes(path: &Path, rows: &[ModeRow]) -> Result<(), Error> {
             }
         };
         let mut chart = ChartBuilder::on(&panels[0])
-            .caption("Fig. 10b: Dice per frame by mode (phantoms, tools, zoom)", (FONT, 18))
+            .caption(
+                "Fig. 10b: Dice per frame by mode (phantoms, tools, zoom)",
+                (FONT, 18),
+            )
             .margin(15)
             .x_label_area_size(40)
             .y_label_area_size(60)
@@ -491,7 +551,10 @@ pub fn modes(path: &Path, rows: &[ModeRow]) -> Result<(), Error> {
             }
             let x = i as f64;
             chart
-                .draw_series([Rectangle::new([(x - 0.25, 0.0), (x + 0.25, *h)], colour(i).filled())])
+                .draw_series([Rectangle::new(
+                    [(x - 0.25, 0.0), (x + 0.25, *h)],
+                    colour(i).filled(),
+                )])
                 .map_err(s)?;
         }
         Ok(())

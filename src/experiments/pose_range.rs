@@ -199,11 +199,19 @@ impl Searcher<'_> {
         if let Some(i) = self.seen.iter().position(|(v, _)| *v == value) {
             return &self.seen[i].1;
         }
-        let params = self
-            .rig
-            .params(Mode::L, Phase::FirstFrame, Zoom::Off, &super::rig::experiment_config());
+        let params = self.rig.params(
+            Mode::L,
+            Phase::FirstFrame,
+            Zoom::Off,
+            &super::rig::experiment_config(),
+        );
         let start = FitState {
-            affine: perturbed(&self.rig.truth.affine, self.rig.centre_mm, self.param, value),
+            affine: perturbed(
+                &self.rig.truth.affine,
+                self.rig.centre_mm,
+                self.param,
+                value,
+            ),
             ..self.rig.truth.clone()
         };
         let outcome: Outcome = self

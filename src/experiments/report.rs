@@ -45,7 +45,11 @@ fn range_text(r: &Range) -> String {
         };
         if capped { format!("{t}*") } else { t }
     };
-    format!("{} … {}", end(r.low, r.low_capped), end(r.high, r.high_capped))
+    format!(
+        "{} … {}",
+        end(r.low, r.low_capped),
+        end(r.high, r.high_capped)
+    )
 }
 
 /// Is ours at least as wide as the paper's on both sides?
@@ -65,7 +69,11 @@ pub fn markdown(res: &Results) -> String {
          of the same name.\n",
         if res.quick { " --quick" } else { "" },
         res.seed,
-        if res.quick { "the reduced (quick)" } else { "the full" },
+        if res.quick {
+            "the reduced (quick)"
+        } else {
+            "the full"
+        },
         res.seconds
     );
     let _ = writeln!(s, "## Set-up\n");
@@ -86,7 +94,11 @@ pub fn markdown(res: &Results) -> String {
     );
 
     // Table IV.
-    let _ = writeln!(s, "## Table IV — pose-recovery range against number of views (σ = {})\n", g.pose.sigma);
+    let _ = writeln!(
+        s,
+        "## Table IV — pose-recovery range against number of views (σ = {})\n",
+        g.pose.sigma
+    );
     let _ = writeln!(
         s,
         "**Recovered** means: the fit (mode L, the affine T of eq. 2, the project's first-frame settings, coarse to \
@@ -103,7 +115,11 @@ pub fn markdown(res: &Results) -> String {
     views.dedup();
     let _ = write!(s, "| parameter |");
     for v in &views {
-        let _ = write!(s, " {v} view{} (ours) | paper |", if *v == 1 { "" } else { "s" });
+        let _ = write!(
+            s,
+            " {v} view{} (ours) | paper |",
+            if *v == 1 { "" } else { "s" }
+        );
     }
     let _ = writeln!(s);
     let _ = write!(s, "|---|");
@@ -149,7 +165,9 @@ pub fn markdown(res: &Results) -> String {
     let one_view: Vec<&Range> = res
         .pose
         .iter()
-        .filter(|r| r.views == 1 && matches!(r.param, Param::ThetaX | Param::ThetaY | Param::ThetaZ))
+        .filter(|r| {
+            r.views == 1 && matches!(r.param, Param::ThetaX | Param::ThetaY | Param::ThetaZ)
+        })
         .collect();
     if !one_view.is_empty() {
         let met = one_view.iter().all(|r| r.low <= -60.0 && r.high >= 60.0);
@@ -166,7 +184,10 @@ pub fn markdown(res: &Results) -> String {
     }
 
     // Fig. 4.
-    let _ = writeln!(s, "## Fig. 4 — Dice against noise, ours against Chan–Vese (ACWOE)\n");
+    let _ = writeln!(
+        s,
+        "## Fig. 4 — Dice against noise, ours against Chan–Vese (ACWOE)\n"
+    );
     let _ = writeln!(
         s,
         "Ours: mode LS (affine + shape), started {}° and {} mm from the truth in a random direction per trial. \
@@ -190,7 +211,12 @@ pub fn markdown(res: &Results) -> String {
     keys.dedup();
     let _ = write!(s, "| σ |");
     for (m, v) in &keys {
-        let _ = write!(s, " {} ({v} view{}) |", if *m == "ours" { "ours" } else { "Chan–Vese" }, if *v == 1 { "" } else { "s" });
+        let _ = write!(
+            s,
+            " {} ({v} view{}) |",
+            if *m == "ours" { "ours" } else { "Chan–Vese" },
+            if *v == 1 { "" } else { "s" }
+        );
     }
     let _ = writeln!(s);
     let _ = writeln!(s, "|---|{}", "---|".repeat(keys.len()));
@@ -227,12 +253,19 @@ pub fn markdown(res: &Results) -> String {
             s,
             "\nGoal — Dice ≥ 0.9 at σ = {top:.2} where ACWOE falls below 0.6: ours {ours_min:.3} (worst view count), \
              ACWOE {cv_max:.3}: **{}**.\n",
-            if ours_min >= 0.9 && cv_max < 0.6 { "met" } else { "not met" }
+            if ours_min >= 0.9 && cv_max < 0.6 {
+                "met"
+            } else {
+                "not met"
+            }
         );
     }
 
     // Fig. 6.
-    let _ = writeln!(s, "## Fig. 6 — tolerable shape perturbation against noise and number of views\n");
+    let _ = writeln!(
+        s,
+        "## Fig. 6 — tolerable shape perturbation against noise and number of views\n"
+    );
     let _ = writeln!(
         s,
         "The true shape is d standard deviations from the mean (a random direction in the whitened weights, so \
@@ -303,21 +336,42 @@ pub fn markdown(res: &Results) -> String {
     );
     let rows: Vec<_> = res.camera.iter().filter(|r| r.frame > 0).collect();
     let n = rows.len().max(1) as f64;
-    let fx_rel: Vec<f64> = rows.iter().map(|r| (r.estimate.fx / r.truth.fx - 1.0).abs()).collect();
-    let cx: Vec<f64> = rows.iter().map(|r| (r.estimate.cx - r.truth.cx).abs()).collect();
-    let cy: Vec<f64> = rows.iter().map(|r| (r.estimate.cy - r.truth.cy).abs()).collect();
-    let k1: Vec<f64> = rows.iter().map(|r| (r.estimate.k1 - r.truth.k1).abs()).collect();
+    let fx_rel: Vec<f64> = rows
+        .iter()
+        .map(|r| (r.estimate.fx / r.truth.fx - 1.0).abs())
+        .collect();
+    let cx: Vec<f64> = rows
+        .iter()
+        .map(|r| (r.estimate.cx - r.truth.cx).abs())
+        .collect();
+    let cy: Vec<f64> = rows
+        .iter()
+        .map(|r| (r.estimate.cy - r.truth.cy).abs())
+        .collect();
+    let k1: Vec<f64> = rows
+        .iter()
+        .map(|r| (r.estimate.k1 - r.truth.k1).abs())
+        .collect();
     let max = |v: &[f64]| v.iter().copied().fold(0.0, f64::max);
     let mean = |v: &[f64]| v.iter().sum::<f64>() / n;
     let _ = writeln!(s, "| | mean | worst |\n|---|---|---|");
-    let _ = writeln!(s, "| fx relative error | {:.2} % | {:.2} % |", 100.0 * mean(&fx_rel), 100.0 * max(&fx_rel));
+    let _ = writeln!(
+        s,
+        "| fx relative error | {:.2} % | {:.2} % |",
+        100.0 * mean(&fx_rel),
+        100.0 * max(&fx_rel)
+    );
     let _ = writeln!(s, "| cx error | {:.2} px | {:.2} px |", mean(&cx), max(&cx));
     let _ = writeln!(s, "| cy error | {:.2} px | {:.2} px |", mean(&cy), max(&cy));
     let _ = writeln!(s, "| k1 error | {:.4} | {:.4} |", mean(&k1), max(&k1));
     let _ = writeln!(
         s,
         "\nGoal — fx within 1 % and cx within 1 px through the zoom (worst frame): **{}**.\n",
-        if max(&fx_rel) <= 0.01 && max(&cx) <= 1.0 { "met" } else { "not met" }
+        if max(&fx_rel) <= 0.01 && max(&cx) <= 1.0 {
+            "met"
+        } else {
+            "not met"
+        }
     );
 
     // Fig. 10b.
@@ -331,7 +385,10 @@ pub fn markdown(res: &Results) -> String {
          tumour's centroid error (mean over frames), which the paper could not measure.\n",
         m.seeds, m.width, m.height, m.frames, m.noise
     );
-    let _ = writeln!(s, "| scene | mode | Dice mean | Dice p25 | Dice p75 | hidden tumour centroid (mm) |\n|---|---|---|---|---|---|");
+    let _ = writeln!(
+        s,
+        "| scene | mode | Dice mean | Dice p25 | Dice p75 | hidden tumour centroid (mm) |\n|---|---|---|---|---|---|"
+    );
     for r in &res.modes {
         let _ = writeln!(
             s,
@@ -375,7 +432,11 @@ pub fn markdown(res: &Results) -> String {
              On these phantoms the visible silhouettes are matched in every mode (R, L and LS follow the zoom by \
              moving the kidney in depth), so Dice barely tells the modes apart; the hidden tumour does: {:.1} mm in LS \
              against {:.1} mm in LSC. This is why the project reports the hidden-structure error beside Dice.\n",
-            if ordered { "holds" } else { "does not hold here" },
+            if ordered {
+                "holds"
+            } else {
+                "does not hold here"
+            },
             spread,
             mean_of(crate::fit::Mode::LS, |r| r.hidden_centroid_mm),
             mean_of(crate::fit::Mode::LSC, |r| r.hidden_centroid_mm)

@@ -189,10 +189,8 @@ impl Rig {
     pub fn fit(&self, images: &[NoisyImage], start: &FitState, params: &FitParams) -> FitState {
         let ctx = FrameContext::new(&self.model, &self.scene);
         let levels = params.levels.iter().max().map_or(1, |&l| l + 1);
-        let mut views: Vec<ViewProbabilities> = images
-            .iter()
-            .map(|im| im.probabilities(levels))
-            .collect();
+        let mut views: Vec<ViewProbabilities> =
+            images.iter().map(|im| im.probabilities(levels)).collect();
         fit_frame(&ctx, start, start, &mut views, None, params).state
     }
 
@@ -319,7 +317,13 @@ mod tests {
             assert!((p.y - HEIGHT_PX as f64 / 2.0).abs() < 1e-6, "{p:?}");
         }
         let e = rig.scene.cameras[0].extrinsics;
-        assert!((e.rotation - DMat3::IDENTITY).abs().to_cols_array().iter().all(|v| *v < 1e-9));
+        assert!(
+            (e.rotation - DMat3::IDENTITY)
+                .abs()
+                .to_cols_array()
+                .iter()
+                .all(|v| *v < 1e-9)
+        );
         assert!(e.translation_mm.length() < 1e-9);
         let masks = rig.silhouettes(&rig.truth);
         for m in &masks {
@@ -337,7 +341,10 @@ mod tests {
         for sigma in [0.25, 0.75, 1.75] {
             let img = &noisy_images(&masks, sigma, 3, 0)[0];
             let est = img.noise_sigma();
-            assert!((est / sigma - 1.0).abs() < 0.05, "σ {sigma}: estimated {est}");
+            assert!(
+                (est / sigma - 1.0).abs() < 0.05,
+                "σ {sigma}: estimated {est}"
+            );
         }
         let img = &noisy_images(&masks, 0.75, 3, 0)[0];
         let probs = img.probabilities(1);

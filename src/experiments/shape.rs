@@ -53,12 +53,19 @@ pub struct ShapeSetup {
 pub fn perturbation(sigma_mm: &[f64], d: f64, rng: &mut Rng) -> Vec<f64> {
     let u: Vec<f64> = sigma_mm.iter().map(|_| rng.normal()).collect();
     let norm = u.iter().map(|x| x * x).sum::<f64>().sqrt().max(1e-12);
-    u.iter().zip(sigma_mm).map(|(x, s)| d * s * x / norm).collect()
+    u.iter()
+        .zip(sigma_mm)
+        .map(|(x, s)| d * s * x / norm)
+        .collect()
 }
 
 fn median(v: &mut [f64]) -> f64 {
     v.sort_by(f64::total_cmp);
-    if v.is_empty() { f64::NAN } else { v[v.len() / 2] }
+    if v.is_empty() {
+        f64::NAN
+    } else {
+        v[v.len() / 2]
+    }
 }
 
 pub fn run(setup: &ShapeSetup, progress: &Progress) -> Vec<ShapeRow> {
@@ -88,8 +95,7 @@ pub fn run(setup: &ShapeSetup, progress: &Progress) -> Vec<ShapeRow> {
             params.hold_pose = true;
             let out = (0..setup.trials as u64)
                 .map(|trial| {
-                    let mut rng =
-                        Rng::fork(setup.seed, 0x5AA9E + trial * 97 + (d * 1000.0) as u64);
+                    let mut rng = Rng::fork(setup.seed, 0x5AA9E + trial * 97 + (d * 1000.0) as u64);
                     let truth = FitState {
                         shape: perturbation(&rig.model.shape.pca.sigma_mm, d, &mut rng),
                         ..rig.truth.clone()
@@ -147,7 +153,10 @@ pub fn tolerable(rows: &[ShapeRow]) -> Vec<(f64, usize, f64)> {
     keys.dedup();
     keys.into_iter()
         .map(|(s, v)| {
-            let mut of: Vec<&ShapeRow> = rows.iter().filter(|r| r.sigma == s && r.views == v).collect();
+            let mut of: Vec<&ShapeRow> = rows
+                .iter()
+                .filter(|r| r.sigma == s && r.views == v)
+                .collect();
             of.sort_by(|a, b| a.perturbation_sd.total_cmp(&b.perturbation_sd));
             let best = of
                 .iter()

@@ -4,12 +4,15 @@
 //! Every tuning constant is in [`config`]. The parts, in the order the data flow: [`model`] (structures and joint shape model),
 //! [`state`] (what is estimated, and its parameter blocks), [`context`] (a frame's cameras and
 //! classes, and how blocks move model points), the image terms [`lines`] and [`stereo`] and the
-//! [`priors`], combined through [`objective`] by the [`optimizer`]; [`init`] places the model
+//! [`priors`], combined through [`objective`] by the [`optimizer`]; [`information`] and
+//! [`hidden_region`] say how sure the fit is of each hidden structure's place; [`init`] places the model
 //! when the scene gives no pose, and [`tracker`] carries the fit from frame to frame (with
 //! [`motion`] and [`zoom`]). [`probability`] evaluates the forest lazily where the lines look.
 
 pub mod config;
 pub mod context;
+pub mod hidden_region;
+pub mod information;
 pub mod init;
 pub mod lines;
 pub mod model;

@@ -28,6 +28,9 @@ pub struct FrameFit {
     /// outside, over all lines of the finest level, in [0, 1].
     pub confidence: f64,
     pub lines: usize,
+    /// The joint information of the fitted state (pose, shape, the rig's intrinsics), when the
+    /// model has hidden structures whose regions need it.
+    pub information: Option<super::information::Information>,
 }
 
 /// One damped Gauss–Newton step on `block` over the lines and the stereo matches; returns the
@@ -373,7 +376,12 @@ pub fn fit_frame(
         ctx.build_lines(&state, views, appearance, &ep)
     };
     let energy = ctx.energy(&lines, &state, &ep);
+    let information =
+        ctx.model.structures.iter().any(|s| !s.visible).then(|| {
+            super::information::joint_information(ctx, &lines, &matches, &state, &ep, params)
+        });
     FrameFit {
+        information,
         confidence: confidence(&lines, &state, ctx, &ep),
         energy,
         iterations,

@@ -174,7 +174,11 @@ impl ViewProbabilities {
         missing.sort_unstable();
         missing.dedup();
         let Some(appearance) = appearance else {
-            debug_assert!(false, "probabilities given whole, yet {} pixels unknown", missing.len());
+            debug_assert!(
+                false,
+                "probabilities given whole, yet {} pixels unknown",
+                missing.len()
+            );
             let lv = &mut self.levels[level];
             for &i in &missing {
                 lv.probs[i as usize * k..(i as usize + 1) * k].fill(1.0 / k as f32);

@@ -8,6 +8,7 @@
 
 use super::config::{FitConfig, FitParams, Mode, Phase, TrackingConfig, Zoom};
 use super::context::FrameContext;
+use super::hidden_region::{HiddenRegion, ZoomHistory, hidden_regions};
 use super::model::Model;
 use super::motion::MotionHistory;
 use super::optimizer::{FrameFit, fit_frame};
@@ -104,6 +105,33 @@ pub struct TrackedFrame {
     pub hidden: Vec<(String, Vec<Mask>)>,
     /// Vertex means of every structure's fitted mesh, camera-0 coordinates (mm).
     pub centroids: Vec<(String, DVec3)>,
+    /// Where each hidden structure could be (its 95 % sphere), in `hidden`'s order.
+    pub hidden_regions: Vec<HiddenRegion>,
+    /// Each hidden structure's projections over its region, per camera.
+    pub region_masks: Vec<(String, Vec<Mask>)>,
+}
+
+/// Each hidden structure's projection widened by its region, per camera (`hidden` and
+/// `regions` in the same order, by structure name).
+pub fn region_masks(
+    cams: &[Camera],
+    hidden: &[(String, Vec<Mask>)],
+    regions: &[HiddenRegion],
+) -> Vec<(String, Vec<Mask>)> {
+    hidden
+        .iter()
+        .filter_map(|(name, masks)| {
+            let region = regions.iter().find(|r| &r.structure == name)?;
+            Some((
+                name.clone(),
+                masks
+                    .iter()
+                    .zip(cams)
+                    .map(|(m, c)| super::hidden_region::region_mask(m, c, region))
+                    .collect(),
+            ))
+        })
+        .collect()
 }
 
 /// Removes from the label image the pixels inside a fitted structure that the forest sees as
@@ -225,6 +253,10 @@ struct FrameTracker<'a> {
     zoom: ZoomDetector,
     /// The same test, in modes without camera correction: a zoom there is explained by depth.
     depth_zoom: ZoomDetector,
+    /// The hidden regions of the last good frame (a lost frame keeps its state, and them).
+    regions: Vec<HiddenRegion>,
+    /// What the cameras have done so far: a zoom's focal-length error outlasts it.
+    zoom_history: ZoomHistory,
 }
 
 /// One frame's fit and what the tracker made of it.
@@ -235,6 +267,11 @@ struct Outcome {
     lost: bool,
     /// The apparent size changed as in a zoom and only the pose could follow it.
     depth_explains_zoom: bool,
+    /// The cameras may have zoomed in this frame (corrected or not): the hidden regions take
+    /// the depth as loosely known from here on.
+    zoom_uncertain: bool,
+    /// ... and the camera correction followed it.
+    zoom_corrected: bool,
     refused: Vec<&'static str>,
 }
 
@@ -267,7 +304,14 @@ impl<'a> FrameTracker<'a> {
         anchor: &FitState,
         params: &FitParams,
     ) -> FrameFit {
-        fit_frame(&self.ctx, anchor, anchor, views, Some(self.appearance), params)
+        fit_frame(
+            &self.ctx,
+            anchor,
+            anchor,
+            views,
+            Some(self.appearance),
+            params,
+        )
     }
 
     fn is_lost(&self, fit: &FrameFit) -> bool {
@@ -361,6 +405,8 @@ impl<'a> FrameTracker<'a> {
             state,
             lost,
             depth_explains_zoom,
+            zoom_uncertain: in_zoom || correct_cameras || depth_explains_zoom || zoom_refused,
+            zoom_corrected: correct_cameras,
             refused,
         })
     }
@@ -507,6 +553,8 @@ pub fn track(
         motion: MotionHistory::new(options.config.zoom.motion),
         zoom: ZoomDetector::new(options.config.zoom.detector),
         depth_zoom: ZoomDetector::new(options.config.zoom.detector),
+        regions: Vec::new(),
+        zoom_history: ZoomHistory::None,
     };
     for t in options.frames.0..=options.frames.1 {
         tracker.cancelled()?;
@@ -528,14 +576,42 @@ pub fn track(
             state,
             lost,
             depth_explains_zoom,
+            zoom_uncertain,
+            zoom_corrected,
             refused,
         } = tracker.frame(t, &mut views)?;
+        if zoom_uncertain {
+            // Once a zoom went uncorrected, the depth stays as loose as that.
+            tracker.zoom_history = match (tracker.zoom_history, zoom_corrected) {
+                (ZoomHistory::Uncorrected, _) | (_, false) => ZoomHistory::Uncorrected,
+                _ => ZoomHistory::Corrected,
+            };
+        }
+        if let (false, Some(info)) = (lost, &fit.information) {
+            tracker.regions = hidden_regions(
+                &tracker.ctx,
+                &state,
+                info,
+                tracker.zoom_history,
+                &options.config.hidden_region,
+            );
+        }
         let ms = started.elapsed().as_secs_f64() * 1e3;
         let Rendered {
             mut labels,
             hidden,
             centroids,
         } = render_state(scene, model, &state);
+        let hidden_regions = if lost {
+            super::hidden_region::widened_when_lost(
+                &tracker.regions,
+                t.saturating_sub(tracker.good_frame),
+                &options.config.hidden_region,
+            )
+        } else {
+            tracker.regions.clone()
+        };
+        let region_masks = region_masks(&cameras_of(scene, &state), &hidden, &hidden_regions);
         for (l, view) in labels.iter_mut().zip(views.iter_mut()) {
             mask_occluders(
                 l,
@@ -564,6 +640,8 @@ pub fn track(
             labels,
             hidden,
             centroids,
+            hidden_regions,
+            region_masks,
         })?;
     }
     Ok(())

@@ -94,6 +94,21 @@ pub struct TrajectoryFrame {
         deserialize_with = "lenient"
     )]
     pub warnings: Vec<String>,
+    /// Where each hidden structure could be (CONTRACT §3): its centroid's covariance under the
+    /// fit's posterior and the 95 % sphere's radius about the fitted centroid.
+    #[serde(
+        default,
+        skip_serializing_if = "BTreeMap::is_empty",
+        deserialize_with = "lenient"
+    )]
+    pub hidden_region: BTreeMap<String, HiddenRegionEntry>,
+}
+
+/// One hidden structure's region in trajectory.json.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct HiddenRegionEntry {
+    pub centroid_cov_mm2: [[f64; 3]; 3],
+    pub radius95_mm: f64,
 }
 
 /// The warning of a frame where depth alone explained a change of apparent size.

@@ -432,6 +432,8 @@ pub struct FitConfig {
     pub zoom: ZoomConfig,
     pub tracking: TrackingConfig,
     pub placement: PlacementConfig,
+    /// The hidden structures' regions (`fit::hidden_region`), calibrated on synthetic scenes.
+    pub hidden_region: crate::fit::hidden_region::HiddenRegionConfig,
 }
 
 #[cfg(test)]

@@ -171,32 +171,50 @@ impl<'a> StereoTerm<'a> {
         block: Block,
         mut f: impl FnMut(&[f64], f64, f64),
     ) {
+        self.for_each_joint_row(state, deformed, &[block], |row, r, w| f(row, r, w));
+    }
+
+    /// [`StereoTerm::for_each_row`] over several blocks at once: each match's row is its
+    /// rows for `blocks` in turn, side by side (a match without a row in one block is left
+    /// out). What the joint information of the fit (`fit::information`) needs.
+    pub fn for_each_joint_row(
+        &self,
+        state: &FitState,
+        deformed: &[Vec<DVec3>],
+        blocks: &[Block],
+        mut f: impl FnMut(&[f64], f64, f64),
+    ) {
         let ctx = self.ctx;
         let rotation_centre = ctx.rotation_centre(state, deformed);
-        for i in 0..self.matches.len() {
+        let mut row: Vec<f64> = Vec::new();
+        'matches: for i in 0..self.matches.len() {
             let Some((r, sigma, posed, pre, normal)) = self.residual(i, state, deformed) else {
                 continue;
             };
             let m = &self.matches[i];
-            let row: Vec<f64> = if let Block::Cameras(n) = block {
-                let Some(row) = self.camera_row(i, n, state, normal) else {
-                    continue;
-                };
-                row
-            } else {
-                ctx.surface_jacobian(
-                    m.structure,
-                    &m.vertices,
-                    posed,
-                    pre,
-                    state,
-                    block,
-                    rotation_centre,
-                )
-                .iter()
-                .map(|c| normal.dot(*c))
-                .collect()
-            };
+            row.clear();
+            for &block in blocks {
+                if let Block::Cameras(n) = block {
+                    let Some(part) = self.camera_row(i, n, state, normal) else {
+                        continue 'matches;
+                    };
+                    row.extend(part);
+                } else {
+                    row.extend(
+                        ctx.surface_jacobian(
+                            m.structure,
+                            &m.vertices,
+                            posed,
+                            pre,
+                            state,
+                            block,
+                            rotation_centre,
+                        )
+                        .iter()
+                        .map(|c| normal.dot(*c)),
+                    );
+                }
+            }
             let w = self.params.weight * self.robust(r / sigma) / (sigma * sigma);
             f(&row, r, w);
         }

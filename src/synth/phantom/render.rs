@@ -181,6 +181,7 @@ impl Phantom {
                 confidence: None,
                 lost: None,
                 warnings: Vec::new(),
+                hidden_region: BTreeMap::new(),
             },
         }
     }

@@ -1,0 +1,191 @@
+//! How sure the fit is of its own parameters: the Gauss–Newton information of the whole
+//! frame (pose, shape weights and the rig's shared intrinsics together) at the fitted state.
+//!
+//! The optimiser moves one block at a time (§II-C), so its normal equations never hold the
+//! cross terms between pose and shape, which are exactly what carries a hidden structure's
+//! uncertainty: a shape mode that moves the tumour may also move the visible rim a little,
+//! and the pose can partly take its place. Here every line's and every stereo match's row is
+//! taken over all blocks at once, weighted as the fit weights it (a line by its target's
+//! certainty, a match by its depth σ and Huber weight), and the fit's own priors on the
+//! shape (Mahalanobis) and the affine's strain are added. Its inverse is the Laplace
+//! approximation of the parameters' covariance, in the energy's units; `hidden_region`
+//! scales it by a calibrated factor, since neighbouring lines see the same errors and are
+//! not independent.
+
+use super::context::FrameContext;
+use super::lines::{EnergyParams, Line, target};
+use super::optimizer::FitParams;
+use super::state::{Block, FitState};
+use super::stereo::{StereoSet, StereoTerm};
+use nalgebra::DMatrix;
+
+/// The rig's shared intrinsics among the columns: fx (fy following at the calibrated aspect),
+/// cx, cy, as the camera block moves them.
+pub const CAMERA_COLUMNS: usize = 3;
+
+/// The joint information of one frame's fit. Columns: the pose block's increments, then the
+/// shape weights (when the shape is fitted), then [`CAMERA_COLUMNS`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct Information {
+    /// The pose block the columns start with: rigid in mode R, affine otherwise.
+    pub pose: Block,
+    /// Shape weights among the columns (0 where the mode does not fit the shape).
+    pub shape_modes: usize,
+    /// Jᵀ W J of the image terms plus the fit's shape and strain priors.
+    pub h: DMatrix<f64>,
+}
+
+impl Information {
+    pub fn pose_columns(&self) -> usize {
+        match self.pose {
+            Block::Rigid => 6,
+            _ => 12,
+        }
+    }
+
+    /// The first camera column.
+    pub fn camera_offset(&self) -> usize {
+        self.pose_columns() + self.shape_modes
+    }
+
+    pub fn size(&self) -> usize {
+        self.camera_offset() + CAMERA_COLUMNS
+    }
+}
+
+/// A camera block row (five per camera) as the rig's shared fx, cx, cy move it: every camera
+/// by the same increment, fy by the increment times the camera's aspect fy/fx.
+fn shared_camera_row(row: &[f64], state: &FitState) -> [f64; CAMERA_COLUMNS] {
+    let mut out = [0.0; CAMERA_COLUMNS];
+    for (m, j) in row.chunks(5).enumerate() {
+        let Some(intr) = state.intrinsics.get(m) else {
+            break;
+        };
+        if j.len() < 4 {
+            break;
+        }
+        let aspect = if intr.fx.abs() > 0.0 {
+            intr.fy / intr.fx
+        } else {
+            1.0
+        };
+        out[0] += j[0] + aspect * j[1];
+        out[1] += j[2];
+        out[2] += j[3];
+    }
+    out
+}
+
+/// Adds w · rowᵀ row to `h`.
+fn add_row(h: &mut DMatrix<f64>, row: &[f64], w: f64) {
+    if !w.is_finite() || w <= 0.0 || row.iter().any(|v| !v.is_finite()) {
+        return;
+    }
+    for r in 0..row.len() {
+        if row[r] == 0.0 {
+            continue;
+        }
+        for q in r..row.len() {
+            h[(r, q)] += w * row[r] * row[q];
+        }
+    }
+}
+
+/// The joint information at `state` from the final level's `lines` (energy settings `ep`) and
+/// stereo matches, with the priors of `params` (its shape prior and strain prior).
+pub fn joint_information(
+    ctx: &FrameContext,
+    lines: &[Line],
+    stereo: &StereoSet,
+    state: &FitState,
+    ep: &EnergyParams,
+    params: &FitParams,
+) -> Information {
+    let pose = if params.mode == super::Mode::R {
+        Block::Rigid
+    } else {
+        Block::Affine
+    };
+    let model = ctx.model;
+    let shape_modes = if matches!(params.mode, super::Mode::LS | super::Mode::LSC) {
+        model.shape.mode_count()
+    } else {
+        0
+    };
+    let mut info = Information {
+        pose,
+        shape_modes,
+        h: DMatrix::zeros(0, 0),
+    };
+    let n = info.size();
+    let cameras = Block::Cameras(ctx.cameras.len());
+    let mut blocks = vec![pose];
+    if shape_modes > 0 {
+        blocks.push(Block::Shape);
+    }
+    let mut h = DMatrix::zeros(n, n);
+    let deformed = model.deformed(&state.shape);
+    let rotation_centre = ctx.rotation_centre(state, &deformed);
+    let mut row = Vec::with_capacity(n);
+    'lines: for line in lines {
+        row.clear();
+        let mut c = None;
+        for &block in &blocks {
+            let Some((at, j)) =
+                ctx.line_jacobian(line, state, &deformed, block, ep.level, rotation_centre)
+            else {
+                continue 'lines;
+            };
+            c = Some(at);
+            row.extend(j);
+        }
+        let Some((at, j)) =
+            ctx.line_jacobian(line, state, &deformed, cameras, ep.level, rotation_centre)
+        else {
+            continue;
+        };
+        row.extend(shared_camera_row(&j, state));
+        let (_, variance) = target::line_target(line, c.unwrap_or(at), ep);
+        add_row(&mut h, &row, 1.0 / variance);
+    }
+    if !stereo.matches.is_empty() {
+        let term = StereoTerm::new(ctx, stereo, state, &deformed, params.stereo);
+        let mut joint_blocks = blocks.clone();
+        joint_blocks.push(cameras);
+        let geometric = info.camera_offset();
+        term.for_each_joint_row(state, &deformed, &joint_blocks, |r, _, w| {
+            if r.len() < geometric {
+                return;
+            }
+            let mut full = r[..geometric].to_vec();
+            full.extend(shared_camera_row(&r[geometric..], state));
+            add_row(&mut h, &full, w);
+        });
+    }
+    for r in 0..n {
+        for q in 0..r {
+            h[(r, q)] = h[(q, r)];
+        }
+    }
+    // The fit's priors, as its steps add them: the strain prior relative to the affine's own
+    // curvature, the shape's Mahalanobis prior absolute.
+    if pose == Block::Affine {
+        let lambda = params.priors.strain * (0..9).map(|k| h[(k, k)]).sum::<f64>() / 9.0;
+        for k in 0..9 {
+            h[(k, k)] += lambda;
+        }
+    }
+    let offset = info.pose_columns();
+    for (k, sigma) in model
+        .shape
+        .pca
+        .sigma_mm
+        .iter()
+        .take(shape_modes)
+        .enumerate()
+    {
+        h[(offset + k, offset + k)] += params.priors.shape / (sigma * sigma).max(1e-12);
+    }
+    info.h = h;
+    info
+}
