@@ -330,12 +330,15 @@ pub fn shape(path: &Path, rows: &[ShapeRow]) -> Result<(), Error> {
     })
 }
 
+/// A series of a time-series panel: its name, the truth and the estimate, as (x, y) points.
+type Series<'a> = (&'a str, Vec<(f64, f64)>, Vec<(f64, f64)>);
+
 /// One time-series panel: truth as a line, the estimate as points.
 fn series_panel(
     area: &DrawingArea<BitMapBackend, Shift>,
     title: &str,
     unit: &str,
-    lines: &[(&str, Vec<(f64, f64)>, Vec<(f64, f64)>)],
+    lines: &[Series],
 ) -> Result<(), String> {
     let xs = lines.iter().flat_map(|l| l.1.iter().map(|p| p.0));
     let x_max = xs.fold(1.0f64, f64::max);

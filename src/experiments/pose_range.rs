@@ -271,9 +271,12 @@ impl Searcher<'_> {
     }
 }
 
+/// A view count's rig with its noise-free silhouettes and each trial's noisy images.
+type RigSet = (usize, Rig, Vec<crate::plane::Mask>, Vec<Vec<NoisyImage>>);
+
 /// Every (views, parameter) range of the table, in parallel over tasks.
 pub fn run(setup: &PoseRangeSetup, progress: &Progress) -> Vec<Range> {
-    let rigs: Vec<(usize, Rig, Vec<crate::plane::Mask>, Vec<Vec<NoisyImage>>)> = setup
+    let rigs: Vec<RigSet> = setup
         .views
         .iter()
         .map(|&v| {
