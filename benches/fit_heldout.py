@@ -59,12 +59,14 @@ def run(args):
     return r
 
 
-def make_scene(spec, work):
+def make_scene(spec, work, frames=FRAMES):
+    """The widened phantom of `spec` (seed, width, height, noise, views, KiTS case, zoom) in
+    `work`, made once (also used by benches/hidden_region_coverage.py)."""
     seed, w, h, noise, views, case, zoom = spec
     out = os.path.join(work, f"scene-{seed}")
     if os.path.exists(os.path.join(out, "scene.json")):
         return out
-    args = [BIN, "synth", "--out", out, "--seed", str(seed), "--frames", str(FRAMES),
+    args = [BIN, "synth", "--out", out, "--seed", str(seed), "--frames", str(frames),
             "--width", str(w), "--height", str(h), "--noise", str(noise), "--views", str(views),
             "--vary-rig", "--vary-look"]
     if not zoom:

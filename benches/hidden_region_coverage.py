@@ -22,13 +22,13 @@ import math
 import os
 import random
 import statistics
-import subprocess
 import sys
 import tempfile
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-BIN = os.path.join(ROOT, "target", "release", "endofuse")
-KITS = os.path.join(ROOT, "..", "shared", "data", "kits19-shape-set")
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import fit_heldout as heldout  # noqa: E402  (the widened phantoms and how to run the CLI)
+
+BIN, run = heldout.BIN, heldout.run
 
 # (seed, width, height, noise, views, kits case or None, zoom)
 TUNING = [
@@ -52,31 +52,8 @@ TEST = [
 FRAMES = 24
 
 
-def run(args):
-    r = subprocess.run(args, capture_output=True, text=True)
-    if r.returncode != 0:
-        sys.exit(f"{' '.join(args)} failed ({r.returncode}):\n{r.stderr[-2000:]}")
-    return r
-
-
 def make_scene(spec, work):
-    seed, w, h, noise, views, case, zoom = spec
-    out = os.path.join(work, f"scene-{seed}")
-    if os.path.exists(os.path.join(out, "scene.json")):
-        return out
-    args = [BIN, "synth", "--out", out, "--seed", str(seed), "--frames", str(FRAMES),
-            "--width", str(w), "--height", str(h), "--noise", str(noise), "--views", str(views),
-            "--vary-rig", "--vary-look"]
-    if not zoom:
-        args.append("--no-zoom")
-    if case:
-        meshes = os.path.join(work, f"ct-{case}")
-        if not os.path.exists(meshes):
-            run([BIN, "import-ct", os.path.join(KITS, f"{case}.segmentation.nii.gz"),
-                 "--out", meshes])
-        args += ["--meshes", meshes]
-    run(args)
-    return out
+    return heldout.make_scene(spec, work, frames=FRAMES)
 
 
 # The data part alone: what the calibration rebuilds the region from.
