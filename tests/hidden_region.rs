@@ -6,7 +6,6 @@
 mod common;
 
 use common::read_json as json;
-use std::process::Command;
 
 #[test]
 fn the_hidden_region_is_written_and_holds_the_true_tumour() {
@@ -18,19 +17,14 @@ fn the_hidden_region_is_written_and_holds_the_true_tumour() {
         ],
     );
     let out = common::scratch_dir("hidden-region-out");
-    let run = Command::new(env!("CARGO_BIN_EXE_endofuse"))
-        .arg("track")
-        .arg(&scene)
-        .arg("--out")
-        .arg(&out)
-        .args(["--mode", "LSC"])
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
+    common::run_ok(&[
+        "track".as_ref(),
+        scene.as_os_str(),
+        "--out".as_ref(),
+        out.as_os_str(),
+        "--mode".as_ref(),
+        "LSC".as_ref(),
+    ]);
     let traj = json(&out.join("trajectory.json"));
     let truth = json(&scene.join("gt/trajectory.json"));
     let frames = traj["frames"].as_array().unwrap();
