@@ -28,8 +28,8 @@ pub struct FrameFit {
     /// outside, over all lines of the finest level, in [0, 1].
     pub confidence: f64,
     pub lines: usize,
-    /// The joint information of the fitted state (pose, shape, the rig's intrinsics), when the
-    /// model has hidden structures whose regions need it.
+    /// The joint information of the fitted state (pose, shape, the rig's intrinsics), when
+    /// `params.information` asks for it and the model has hidden structures.
     pub information: Option<super::information::Information>,
 }
 
@@ -376,10 +376,8 @@ pub fn fit_frame(
         ctx.build_lines(&state, views, appearance, &ep)
     };
     let energy = ctx.energy(&lines, &state, &ep);
-    let information =
-        ctx.model.structures.iter().any(|s| !s.visible).then(|| {
-            super::information::joint_information(ctx, &lines, &matches, &state, &ep, params)
-        });
+    let information = (params.information && ctx.model.structures.iter().any(|s| !s.visible))
+        .then(|| super::information::joint_information(ctx, &lines, &matches, &state, &ep, params));
     FrameFit {
         information,
         confidence: confidence(&lines, &state, ctx, &ep),

@@ -76,6 +76,7 @@ impl TrackOptions {
     pub fn params(&self, phase: Phase, zoom: Zoom) -> FitParams {
         FitParams {
             cancel: self.cancel.clone(),
+            information: true,
             ..self
                 .config
                 .resolve(self.mode, phase, zoom, self.fit_level())

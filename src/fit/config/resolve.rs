@@ -38,6 +38,11 @@ pub struct FitParams {
     /// cancel is answered within one step (a few ms), not one frame.
     #[serde(skip)]
     pub cancel: Option<Arc<AtomicBool>>,
+    /// Also take the joint information of the fitted state ([`crate::fit::FrameFit`]'s
+    /// `information`), for the hidden regions: the tracker sets it; placement hypotheses and
+    /// the experiments, whose fits nobody asks that of, do not pay for it.
+    #[serde(skip)]
+    pub information: bool,
 }
 
 impl FitParams {
@@ -68,6 +73,7 @@ impl FitConfig {
             priors: self.priors,
             stereo: self.stereo,
             cancel: None,
+            information: false,
         };
         match phase {
             Phase::FirstFrame => {
