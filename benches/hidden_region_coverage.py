@@ -31,6 +31,9 @@ import fit_heldout as heldout  # noqa: E402  (the widened phantoms and how to ru
 BIN, run = heldout.BIN, heldout.run
 
 # (seed, width, height, noise, views, kits case or None, zoom)
+# The first calibration (session 2026-12-02) chose on 501-506 and reported 601-608; the second
+# (the rim residual's share k and the lost-frame growth) looked at 601-608's misses, so they
+# joined the tuning set, and 701-710 were fixed as the test set before k and g were chosen.
 TUNING = [
     (501, 480, 270, 0.02, 2, None, True),
     (502, 480, 270, 0.05, 2, None, True),
@@ -38,8 +41,6 @@ TUNING = [
     (504, 480, 270, 0.03, 2, "case_00009", True),
     (505, 640, 360, 0.05, 2, None, True),
     (506, 480, 270, 0.02, 4, None, True),
-]
-TEST = [
     (601, 480, 270, 0.02, 2, None, True),
     (602, 480, 270, 0.05, 2, None, True),
     (603, 640, 360, 0.03, 2, None, True),
@@ -48,6 +49,18 @@ TEST = [
     (606, 480, 270, 0.05, 2, "case_00023", True),
     (607, 480, 270, 0.02, 4, None, True),
     (608, 960, 540, 0.03, 2, None, True),
+]
+TEST = [
+    (701, 480, 270, 0.03, 2, None, True),
+    (702, 480, 270, 0.05, 2, "case_00041", True),
+    (703, 640, 360, 0.02, 2, None, True),
+    (704, 480, 270, 0.05, 2, None, False),
+    (705, 480, 270, 0.03, 2, "case_00057", True),
+    (706, 960, 540, 0.05, 2, None, True),
+    (707, 480, 270, 0.02, 4, "case_00082", True),
+    (708, 480, 270, 0.04, 2, "case_00109", True),
+    (709, 640, 360, 0.05, 2, None, True),
+    (710, 480, 270, 0.03, 2, "case_00130", False),
 ]
 FRAMES = 24
 
@@ -58,6 +71,7 @@ def make_scene(spec, work):
 
 # The data part alone: what the calibration rebuilds the region from.
 RAW = {"hidden_region": {"covariance_scale": 1.0, "model_error_mm": 0.0,
+                         "model_error_per_rim_residual": 0.0, "lost_growth_mm_per_frame": 0.0,
                          "zoom_depth_sd_corrected": 0.0, "zoom_depth_sd_uncorrected": 0.0}}
 
 
@@ -82,7 +96,9 @@ def track(scene, mode, work, tag, raw=False):
     first_zoom = min((c[0] for c in changes), default=None)
     zoomed = False
     rows = []
+    lost_run = 0
     for fr in fitted["frames"]:
+        lost_run = lost_run + 1 if fr.get("lost", False) else 0
         # As the tracker keeps it: from the first zoomed frame on (a marked change, or a
         # frame where depth followed a zoom).
         zoomed = zoomed or (first_zoom is not None and fr["frame"] >= first_zoom) \
@@ -93,7 +109,8 @@ def track(scene, mode, work, tag, raw=False):
                 continue
             err = [a - b for a, b in zip(gt["centroids"][name], fr["centroids"][name])]
             rows.append({"err": err, "cov": region["centroid_cov_mm2"],
-                         "radius": region["radius95_mm"], "lost": fr.get("lost", False),
+                         "radius": region["radius95_mm"], "lost": lost_run,
+                         "rim": region.get("rim_residual_mm", 0.0),
                          "c": fr["centroids"][name], "zoomed": zoomed})
     config = metrics.get("config", {}).get("fit", {}).get("hidden_region", {})
     return rows, metrics, config
@@ -150,12 +167,15 @@ def radius95(cov):
     return math.sqrt(q[math.ceil(0.95 * len(q)) - 1])
 
 
-def rebuilt(row, s, e, d):
-    """A raw row's covariance (data part alone) with the constants (s, e, d), as the tracker
-    builds it: s · data + e² I + d² c cᵀ after a zoom."""
+def rebuilt(row, s, e, d, k=0.0, g=0.0):
+    """A raw row's covariance (data part alone) with the constants (s, e, d, k, g), as the
+    tracker builds it: s · data + (e² + (k · rim)²) I + d² c cᵀ after a zoom, + (g · n)² I
+    n frames into a loss. A lost frame's row holds the last good frame's data part and
+    centroid; its rim residual is that frame's too."""
     c = row["c"]
     dz = d if row["zoomed"] else 0.0
-    return [[s * row["cov"][i][j] + (e * e if i == j else 0) + dz * dz * c[i] * c[j]
+    diag = e * e + (k * row["rim"]) ** 2 + (g * row["lost"]) ** 2
+    return [[s * row["cov"][i][j] + (diag if i == j else 0) + dz * dz * c[i] * c[j]
              for j in range(3)] for i in range(3)]
 
 
@@ -163,18 +183,35 @@ def inside(row, radius):
     return math.sqrt(sum(v * v for v in row["err"])) <= radius
 
 
+def coverage(rows, *constants):
+    radii = [radius95(rebuilt(r, *constants)) for r in rows]
+    cover = sum(inside(r, rad) for r, rad in zip(rows, radii)) / len(rows)
+    return cover, statistics.median(radii)
+
+
 def calibrate(rows, ds):
-    """The (s, e, d) with the smallest median radius whose coverage is at least 95 %."""
+    """The (s, e, d, k) with the smallest median radius whose coverage of the frames tracked
+    is at least 95 %, then the lost-frame growth g: the smallest on its grid whose coverage of
+    the lost frames is at least 95 % (or the largest)."""
+    good = [r for r in rows if not r["lost"]]
+    lost = [r for r in rows if r["lost"]]
     best = None
     for s in [0.5, 1, 2, 4, 8, 16]:
         for e in [0.0, 0.5, 0.75, 1.0, 1.25, 1.5, 2.0]:
             for d in ds:
-                radii = [radius95(rebuilt(r, s, e, d)) for r in rows]
-                cover = sum(inside(r, rad) for r, rad in zip(rows, radii)) / len(rows)
-                med = statistics.median(radii)
-                if cover >= 0.95 and (best is None or med < best[3]):
-                    best = (s, e, d, med, cover)
-    return best
+                for k in [0.0, 0.5, 1.0, 1.5, 2.0, 3.0]:
+                    cover, med = coverage(good, s, e, d, k)
+                    if cover >= 0.95 and (best is None or med < best[4]):
+                        best = (s, e, d, k, med, cover)
+    if best is None:
+        return None
+    g_grid = [0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0]
+    g = g_grid[-1]
+    for cand in g_grid:
+        if lost and coverage(lost, *best[:4], cand)[0] >= 0.95:
+            g = cand
+            break
+    return best + (g, coverage(rows, *best[:4], g), len(lost))
 
 
 def main():
@@ -196,18 +233,21 @@ def main():
     for name in chosen:
         for mode in modes:
             rows, config = [], {}
-            for spec in sets[name]:
+            # Calibrating needs the data part alone (the "raw" runs); the tracked figures
+            # with the chosen constants come from a plain run after they are made defaults.
+            for spec in sets[name] if not (args.calibrate and name == "tuning") else []:
                 scene = make_scene(spec, work)
                 r, _, config = track(scene, mode, work, spec[0])
                 rows.extend(r)
-            if not rows:
+            if not rows and not args.calibrate:
                 print(f"| {name} | {mode} | 0 | – | – | – | – |")
                 continue
-            cover = sum(inside(r, r["radius"]) for r in rows) / len(rows)
-            errs = [math.sqrt(sum(v * v for v in r["err"])) for r in rows]
-            print(f"| {name} | {mode} | {len(rows)} | {100 * cover:.1f} % | "
-                  f"{statistics.median(r['radius'] for r in rows):.2f} | "
-                  f"{statistics.mean(errs):.2f} | {max(errs):.2f} |", flush=True)
+            if rows:
+                cover = sum(inside(r, r["radius"]) for r in rows) / len(rows)
+                errs = [math.sqrt(sum(v * v for v in r["err"])) for r in rows]
+                print(f"| {name} | {mode} | {len(rows)} | {100 * cover:.1f} % | "
+                      f"{statistics.median(r['radius'] for r in rows):.2f} | "
+                      f"{statistics.mean(errs):.2f} | {max(errs):.2f} |", flush=True)
             if args.calibrate and name == "tuning":
                 raw = []
                 for spec in sets[name]:
@@ -217,9 +257,12 @@ def main():
                     else [0.0, 0.02, 0.04, 0.06, 0.08, 0.1, 0.12, 0.15]
                 best = calibrate(raw, ds)
                 if best:
-                    print(f"  calibrated on {mode}: covariance_scale {best[0]}, model_error_mm "
-                          f"{best[1]}, zoom depth sd {best[2]}: coverage {100 * best[4]:.1f} %, "
-                          f"median radius {best[3]:.2f} mm", flush=True)
+                    s_, e_, d_, k_, med, cover, g_, (all_cover, all_med), n_lost = best
+                    print(f"  calibrated on {mode}: covariance_scale {s_}, model_error_mm {e_}, "
+                          f"zoom depth sd {d_}, model_error_per_rim_residual {k_}: coverage "
+                          f"{100 * cover:.1f} %, median radius {med:.2f} mm (tracked frames); "
+                          f"lost_growth_mm_per_frame {g_} over {n_lost} lost frames; all "
+                          f"frames {100 * all_cover:.1f} %, median {all_med:.2f} mm", flush=True)
                 else:
                     print(f"  calibrated on {mode}: nothing on the grid reaches 95 %")
     if not args.keep:

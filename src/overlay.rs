@@ -1,5 +1,6 @@
 //! CPU compositing of labels over a frame: translucent fills with crisp contours for visible
-//! structures, a dashed outline with a faint fill for hidden ones, and seed strokes. Used for
+//! structures, a dashed outline with a faint fill for hidden ones, a halo for where a hidden
+//! one could be (its 95 % region), and seed strokes. Used for
 //! the README's ground-truth picture and for exported overlay PNGs; the app draws its live
 //! overlay on the GPU with the same colours.
 
@@ -89,6 +90,65 @@ pub fn draw_hidden(img: &mut RgbImage, mask: &Mask, colour_index: usize) {
     }
 }
 
+/// The opacity of each pixel of a hidden structure's 95 % region around its fitted
+/// projection (`hidden`; `region` the union of its projections over the region, a superset):
+/// a soft halo at `opacity` beside the fitted outline fading to a third of that at the
+/// region's edge, and a dashed contour (opaque dashes) on that edge. 0 inside the fitted
+/// projection (drawn by the structure itself) and outside the region.
+pub fn region_alpha(hidden: &Mask, region: &Mask, opacity: f32) -> Vec<f32> {
+    let (w, h) = (region.width, region.height);
+    if hidden.width != w || hidden.height != h {
+        return vec![0.0; region.data.len()];
+    }
+    let d2 = crate::render::squared_edt(hidden);
+    let reach = region
+        .data
+        .iter()
+        .zip(&d2.data)
+        .filter(|(r, _)| **r)
+        .map(|(_, &d)| d as f32)
+        .fold(0f32, f32::max)
+        .sqrt()
+        .max(1.0);
+    let mut alpha = vec![0f32; region.data.len()];
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            if !region.data[i] || hidden.data[i] {
+                continue;
+            }
+            let edge = is_edge(w, h, x, y, |a, b| *region.get(a, b));
+            alpha[i] = if edge {
+                if ((x + y) / 4) % 2 == 0 { 1.0 } else { 0.35 }
+            } else {
+                let d = (d2.data[i] as f32).sqrt() / reach;
+                opacity * (1.0 - 0.67 * d.clamp(0.0, 1.0))
+            };
+        }
+    }
+    alpha
+}
+
+/// A hidden structure's 95 % region ([`region_alpha`]) over `img` in colour `colour_index`.
+pub fn draw_region(
+    img: &mut RgbImage,
+    hidden: &Mask,
+    region: &Mask,
+    colour_index: usize,
+    opacity: f32,
+) {
+    let c = structure_colour(colour_index);
+    for (i, a) in region_alpha(hidden, region, opacity)
+        .into_iter()
+        .enumerate()
+    {
+        let (x, y) = ((i % region.width) as u32, (i / region.width) as u32);
+        if a > 0.0 && x < img.width() && y < img.height() {
+            blend(img.get_pixel_mut(x, y), c, a);
+        }
+    }
+}
+
 /// Seed strokes, opaque.
 pub fn draw_seeds(
     img: &mut RgbImage,
@@ -128,8 +188,18 @@ pub fn tile(images: &[RgbImage], columns: usize) -> RgbImage {
 
 /// A tracked frame over camera `c`'s image: visible structures filled and outlined, hidden
 /// ones dashed, each in its scene colour (what the app's export writes).
+/// Each hidden structure's 95 % region is drawn around its outline.
 pub fn draw_tracked(img: &mut RgbImage, scene: &Scene, f: &TrackedFrame, c: usize) {
     draw_fit(img, scene, &f.labels, &f.hidden, c, 0.3);
+    for (name, regions) in &f.region_masks {
+        let i = scene.structures.iter().position(|s| &s.name == name);
+        let hidden = f.hidden.iter().find(|(n, _)| n == name).map(|(_, m)| m);
+        if let (Some(i), Some(region), Some(hidden)) =
+            (i, regions.get(c), hidden.and_then(|m| m.get(c)))
+        {
+            draw_region(img, hidden, region, i, 0.25);
+        }
+    }
 }
 
 /// Fitted labels (fill opacity `alpha`) and hidden structures' masks of camera `c` over

@@ -85,6 +85,17 @@ impl FrameResult {
                     centroid_mm: *c,
                     covariance_mm2: e.centroid_cov_mm2,
                     radius_mm: e.radius95_mm,
+                    rim_residual_mm: e.rim_residual_mm.unwrap_or(0.0),
+                    margin: match (e.surface_mm, e.depth_mm, e.margin95_mm) {
+                        (Some(surface_mm), Some(fitted_mm), Some(region_mm)) => {
+                            Some(crate::fit::depth_margin::DepthMargin {
+                                surface_mm,
+                                fitted_mm,
+                                region_mm,
+                            })
+                        }
+                        _ => None,
+                    },
                 })
             })
             .collect()

@@ -36,6 +36,8 @@ pub enum Action {
     LastFrame,
     ResetView,
     Review,
+    /// Show or hide the hidden structures' 95 % regions.
+    HiddenRegion,
     /// Paint forest class k (0 = background/tools) with the brush: number key k + 1.
     PickClass(u8),
     /// Pan the views: drag while holding Space (or with the middle button).
@@ -81,7 +83,7 @@ const fn cmd(k: Key) -> Option<KeyboardShortcut> {
 
 impl Action {
     /// In the order the key handler tries them (Redo before Undo: Ctrl+Shift+Z contains Ctrl+Z).
-    pub const ALL: [Action; 40] = [
+    pub const ALL: [Action; 41] = [
         Action::NewScene,
         Action::OpenScene,
         Action::OpenDemo,
@@ -111,6 +113,7 @@ impl Action {
         Action::LastFrame,
         Action::ResetView,
         Action::Review,
+        Action::HiddenRegion,
         Action::PickClass(0),
         Action::PickClass(1),
         Action::PickClass(2),
@@ -155,6 +158,7 @@ impl Action {
             Action::LastFrame => "Last frame",
             Action::ResetView => "Fit views to window",
             Action::Review => "Review plots",
+            Action::HiddenRegion => "Where hidden structures could be (95 % region)",
             Action::Help => "Help: shortcuts and first steps",
             Action::PickClass(k) => CLASS_LABELS.get(k as usize).copied().unwrap_or("Paint"),
             Action::Pan => "Pan views (hold and drag)",
@@ -191,6 +195,7 @@ impl Action {
             Action::FirstFrame => key(Key::Home),
             Action::LastFrame => key(Key::End),
             Action::ResetView => key(Key::R),
+            Action::HiddenRegion => key(Key::H),
             Action::Help => key(Key::F1),
             Action::PickClass(k) => CLASS_KEYS.get(k as usize).copied().and_then(key),
             Action::OpenDemo

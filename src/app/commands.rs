@@ -229,6 +229,7 @@ impl EndofuseApp {
             Action::LastFrame => self.set_frame(frames - 1),
             Action::ResetView => self.view.transform = None,
             Action::Review => self.view.show_review = !self.view.show_review,
+            Action::HiddenRegion => self.prefs.show_hidden_region = !self.prefs.show_hidden_region,
             Action::Help => self.view.show_help = !self.view.show_help,
             Action::PickClass(k) => {
                 let classes = self.doc.classes.as_ref().map_or(0, |c| c.len());

@@ -31,6 +31,9 @@ pub struct Prefs {
     pub overlay_opacity: f32,
     pub show_seeds: bool,
     pub show_overlay: bool,
+    /// Draw each hidden structure's 95 % region (where it could be) around its outline.
+    pub show_hidden_region: bool,
+    pub hidden_region_opacity: f32,
     /// The fit mode last chosen (R, L, LS, LSC), kept between runs.
     pub mode: String,
     /// Always pick files in the built-in browser, never the system's dialog.
@@ -48,6 +51,8 @@ impl Default for Prefs {
             overlay_opacity: 0.3,
             show_seeds: true,
             show_overlay: true,
+            show_hidden_region: true,
+            hidden_region_opacity: 0.3,
             mode: "LSC".into(),
             builtin_file_browser: false,
         }

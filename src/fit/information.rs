@@ -33,6 +33,11 @@ pub struct Information {
     pub shape_modes: usize,
     /// Jᵀ W J of the image terms plus the fit's shape and strain priors.
     pub h: DMatrix<f64>,
+    /// What the fit could not explain: the root mean square of the lines' target shifts at
+    /// the fitted state (full-resolution px; lines whose edge lies past their end are left
+    /// out). Near zero where the model's rim sits on the image's edges; a deformation the
+    /// shape catalog does not span leaves it standing.
+    pub rim_residual_px: f64,
 }
 
 impl Information {
@@ -116,6 +121,7 @@ pub fn joint_information(
         pose,
         shape_modes,
         h: DMatrix::zeros(0, 0),
+        rim_residual_px: 0.0,
     };
     let n = info.size();
     let cameras = Block::Cameras(ctx.cameras.len());
@@ -127,6 +133,7 @@ pub fn joint_information(
     let deformed = model.deformed(&state.shape);
     let rotation_centre = ctx.rotation_centre(state, &deformed);
     let mut row = Vec::with_capacity(n);
+    let (mut shift2, mut shifts) = (0.0, 0usize);
     'lines: for line in lines {
         row.clear();
         let mut c = None;
@@ -145,8 +152,16 @@ pub fn joint_information(
             continue;
         };
         row.extend(shared_camera_row(&j, state));
-        let (_, variance) = target::line_target(line, c.unwrap_or(at), ep);
+        let (shift, variance) = target::line_target(line, c.unwrap_or(at), ep);
         add_row(&mut h, &row, 1.0 / variance);
+        if variance != ep.saturated_line_variance_px2 && shift.is_finite() {
+            shift2 += shift * shift;
+            shifts += 1;
+        }
+    }
+    if shifts > 0 {
+        let level_px = 1.0 / crate::geometry::camera::level_scale(ep.level);
+        info.rim_residual_px = level_px * (shift2 / shifts as f64).sqrt();
     }
     if !stereo.matches.is_empty() {
         let term = StereoTerm::new(ctx, stereo, state, &deformed, params.stereo);

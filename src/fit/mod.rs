@@ -11,6 +11,7 @@
 
 pub mod config;
 pub mod context;
+pub mod depth_margin;
 pub mod hidden_region;
 pub mod information;
 pub mod init;

@@ -612,6 +612,7 @@ pub fn track(
         } else {
             tracker.regions.clone()
         };
+        let hidden_regions = super::hidden_region::with_margins(model, &state, hidden_regions);
         let region_masks = region_masks(&cameras_of(scene, &state), &hidden, &hidden_regions);
         for (l, view) in labels.iter_mut().zip(views.iter_mut()) {
             mask_occluders(

@@ -109,6 +109,18 @@ pub struct TrajectoryFrame {
 pub struct HiddenRegionEntry {
     pub centroid_cov_mm2: [[f64; 3]; 3],
     pub radius95_mm: f64,
+    /// The fit's unexplained rim at the centroid's depth (mm), which widens the region.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rim_residual_mm: Option<f64>,
+    /// Along camera 0's line of sight through the fitted centroid: the distance from the
+    /// camera to the visible surface, from there to the fitted structure, and to the
+    /// nearest point of its 95 % region (mm); absent where that line meets no visible surface.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub surface_mm: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub depth_mm: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub margin95_mm: Option<f64>,
 }
 
 /// The warning of a frame where depth alone explained a change of apparent size.

@@ -65,6 +65,7 @@ pub fn menu_bar(shown: &Shown, ui: &mut egui::Ui) {
                 menu_item(shown, ui, Action::ShowProbability);
                 menu_item(shown, ui, Action::ShowUncertainty);
                 menu_item(shown, ui, Action::ResetView);
+                menu_item(shown, ui, Action::HiddenRegion);
                 menu_item(shown, ui, Action::Review);
             });
             ui.menu_button("Fit", |ui| {

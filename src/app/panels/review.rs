@@ -1,5 +1,5 @@
-//! The review window: Dice per structure, confidence, the hidden structures' centroid error and
-//! the corrected focal lengths over time (the paper's Figs. 7, 10a and 12a), with the export.
+//! The review window: Dice per structure, confidence, the hidden structures' centroid error,
+//! their 95 % radius and depth under the surface, and the corrected focal lengths over time (the paper's Figs. 7, 10a and 12a), with the export.
 //! Each plot's legend is a row above it (never over the curves), each curve keeps its
 //! structure's or camera's colour, and the value axes show enough decimals to read them.
 
@@ -219,6 +219,51 @@ fn focal_lengths(shown: &Shown) -> Vec<Series> {
     series
 }
 
+/// Per hidden structure: its 95 % radius over frames, and (dashed) the depth from the visible
+/// surface to its region's nearest point.
+fn hidden_region_series(shown: &Shown) -> Vec<Series> {
+    let Some(scene) = shown.doc.scene.as_ref() else {
+        return Vec::new();
+    };
+    let mut series = Vec::new();
+    for (i, s) in scene.structures.iter().enumerate() {
+        if s.visible {
+            continue;
+        }
+        let entries = || {
+            shown
+                .doc
+                .results
+                .values()
+                .filter_map(|r| r.hidden_region.get(&s.name).map(|e| (r.frame as f64, e)))
+        };
+        let radius: Vec<[f64; 2]> = entries().map(|(t, e)| [t, e.radius95_mm]).collect();
+        if radius.is_empty() {
+            continue;
+        }
+        let c = structure_colour(i);
+        let colour = Color32::from_rgb(c[0], c[1], c[2]);
+        series.push(Series {
+            name: format!("{} radius", s.name),
+            points: radius,
+            colour,
+            dashed: false,
+        });
+        let margin: Vec<[f64; 2]> = entries()
+            .filter_map(|(t, e)| e.margin95_mm.map(|m| [t, m]))
+            .collect();
+        if !margin.is_empty() {
+            series.push(Series {
+                name: format!("{} depth (95 %)", s.name),
+                points: margin,
+                colour: colour.gamma_multiply(0.7),
+                dashed: true,
+            });
+        }
+    }
+    series
+}
+
 /// Dice per structure, confidence, hidden centroid error and the focal lengths over time.
 pub fn review_window(shown: &Shown, ctx: &egui::Context) {
     let mut open = shown.view.show_review;
@@ -281,6 +326,21 @@ pub fn review_window(shown: &Shown, ctx: &egui::Context) {
                     };
                     let title = "Hidden structures: centroid error against ground truth (mm)";
                     plot(ui, "hidden", title, axis, hidden, frame, 110.0);
+                }
+                let regions = hidden_region_series(shown);
+                if !regions.is_empty() {
+                    let top = regions
+                        .iter()
+                        .flat_map(|s| s.points.iter().map(|p| p[1]))
+                        .fold(1.0f64, f64::max);
+                    let axis = Axis {
+                        label: "mm",
+                        range: Some((0.0, top * 1.1)),
+                        decimals: 0,
+                    };
+                    let title = "Hidden structures: 95 % radius, and depth under the surface \
+                                 at 95 % (dashed) (mm)";
+                    plot(ui, "hidden region", title, axis, regions, frame, 120.0);
                 }
                 let axis = Axis {
                     label: "px",

@@ -254,6 +254,7 @@ fn side_contents(shown: &Shown, ui: &mut egui::Ui) {
         action_button(shown, ui, Action::Track, idle && trained);
         action_button(shown, ui, Action::Review, true);
     });
+    hidden_structures(shown, ui, &mut prefs);
     ui.separator();
     // How the overlay is drawn comes after the workflow (seeds, forest, fit): the main path
     // fits the window without scrolling.
@@ -283,5 +284,66 @@ fn side_contents(shown: &Shown, ui: &mut egui::Ui) {
     }
     if settings != doc.settings {
         send(AppCommand::SetSettings(settings));
+    }
+}
+
+/// Where each hidden structure could be at the current frame: its 95 % radius and how deep it
+/// lies under the visible surface, with the region's toggle and opacity.
+fn hidden_structures(shown: &Shown, ui: &mut egui::Ui, prefs: &mut crate::app::state::Prefs) {
+    let Some(scene) = &shown.doc.scene else {
+        return;
+    };
+    if scene.structures.iter().all(|s| s.visible) {
+        return;
+    }
+    let ctx = ui.ctx().clone();
+    ui.separator();
+    ui.heading("Hidden structures");
+    ui.horizontal(|ui| {
+        ui.checkbox(&mut prefs.show_hidden_region, "95 % region")
+            .on_hover_text(Action::HiddenRegion.hint(&ctx));
+        ui.add(egui::Slider::new(&mut prefs.hidden_region_opacity, 0.0..=1.0).text("opacity"));
+    });
+    let result = shown.doc.results.get(&shown.view.frame);
+    for (i, s) in scene.structures.iter().enumerate() {
+        if s.visible {
+            continue;
+        }
+        ui.horizontal(|ui| {
+            swatch(ui, structure_colour(i));
+            ui.label(RichText::new(&s.name).strong());
+        });
+        let Some(entry) = result.and_then(|r| r.hidden_region.get(&s.name)) else {
+            ui.label(RichText::new("not fitted at this frame").weak());
+            continue;
+        };
+        let lost = result.is_some_and(|r| r.lost);
+        ui.label(format!(
+            "within {:.1} mm of the fitted centre (95 %){}",
+            entry.radius95_mm,
+            if lost { ", widened: frame lost" } else { "" }
+        ))
+        .on_hover_text(
+            "The true centre lies inside a sphere of this radius about the fitted one in 95 % \
+             of frames: the fit's own uncertainty (what the silhouettes leave open of the \
+             pose, the shape and the cameras) plus a calibrated allowance for deformation the \
+             shape model does not span. The halo in the views is the tumour moved anywhere \
+             inside it.",
+        );
+        match (entry.depth_mm, entry.margin95_mm) {
+            (Some(depth), Some(margin)) => {
+                ui.label(format!(
+                    "under the surface: {depth:.1} mm fitted, at least {margin:.1} mm (95 %)"
+                ))
+                .on_hover_text(
+                    "Along the first camera's line of sight through the fitted centre: from the \
+                     visible surface to the fitted structure, and to the nearest point of its \
+                     95 % region. 0 mm: the region reaches the surface.",
+                );
+            }
+            _ => {
+                ui.label(RichText::new("no visible surface in front of it").weak());
+            }
+        }
     }
 }

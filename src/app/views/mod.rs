@@ -131,6 +131,11 @@ pub fn views(shown: &Shown, screen: &mut Screen, ui: &mut egui::Ui) {
             } else if let Some(tex) = overlay::overlay_cpu_texture(shown, screen, &ctx, c) {
                 painter.image(tex.id(), image_rect, uv, Color32::WHITE);
             }
+            if prefs.show_hidden_region
+                && let Some(tex) = textures::region_texture(shown, screen, &ctx, c)
+            {
+                painter.image(tex.id(), image_rect, uv, Color32::WHITE);
+            }
         }
         if prefs.show_seeds
             && !hidden.seeds

@@ -22,6 +22,8 @@ pub struct Textures {
     probability: Vec<Option<TextureHandle>>,
     pub probability_key: Option<(usize, Layer)>,
     pub(super) overlay_cpu: Vec<Option<(usize, TextureHandle)>>,
+    /// Per camera: the hidden structures' regions for (frame, document edits, opacity).
+    region: Vec<Option<((usize, u64, u32, u64), Option<TextureHandle>)>>,
     /// Per camera: where the next stroke helps most, for (frame, seed revision).
     hints: Vec<Option<CachedHint>>,
 }
@@ -30,6 +32,7 @@ impl Textures {
     /// The fitted overlays changed (the model was moved by hand).
     pub fn forget_overlays(&mut self) {
         self.overlay_cpu.clear();
+        self.region.clear();
     }
 }
 
@@ -106,6 +109,85 @@ pub(super) fn seeds_texture(
     );
     *slot(&mut screen.textures.seeds, c) = Some((key, tex.clone()));
     Some(tex)
+}
+
+/// The hidden structures' 95 % regions of camera `c` at the current frame (a halo fading out
+/// from each fitted outline, dashed at the region's edge), recomputed when the frame, the
+/// fits or the opacity change. None where the frame has no fit with regions.
+pub(super) fn region_texture(
+    shown: &Shown,
+    screen: &mut Screen,
+    ctx: &egui::Context,
+    c: usize,
+) -> Option<TextureHandle> {
+    let (doc, frame) = (shown.doc, shown.view.frame);
+    let styles_shown = shown
+        .view
+        .styles
+        .iter()
+        .enumerate()
+        .fold(0u64, |m, (i, s)| m | ((s.shown as u64) << (i % 64)));
+    let key = (
+        frame,
+        doc.edits,
+        shown.prefs.hidden_region_opacity.to_bits(),
+        styles_shown,
+    );
+    if let Some((k, tex)) = slot(&mut screen.textures.region, c)
+        && *k == key
+    {
+        return tex.clone();
+    }
+    let tex = region_rgba(shown, c, frame).map(|(size, rgba)| {
+        rgba_texture(
+            ctx,
+            format!("region-{c}"),
+            size,
+            &rgba,
+            TextureOptions::LINEAR,
+        )
+    });
+    *slot(&mut screen.textures.region, c) = Some((key, tex.clone()));
+    tex
+}
+
+/// The RGBA picture of [`region_texture`].
+fn region_rgba(shown: &Shown, c: usize, frame: usize) -> Option<([usize; 2], Vec<u8>)> {
+    let doc = shown.doc;
+    let (scene, model) = (doc.scene.as_ref()?, doc.model.as_ref()?);
+    let result = doc.results.get(&frame)?;
+    if result.hidden_region.is_empty() {
+        return None;
+    }
+    let rendered = crate::fit::tracker::render_state(scene, model, &result.state);
+    let regions = result.hidden_regions(&rendered.centroids);
+    let cams = crate::fit::tracker::cameras_of(scene, &result.state);
+    let masks = crate::fit::tracker::region_masks(&cams, &rendered.hidden, &regions);
+    let cam = scene.cameras.get(c)?;
+    let (w, h) = (cam.width as usize, cam.height as usize);
+    let mut rgba = vec![0u8; w * h * 4];
+    for (name, region) in &masks {
+        let index = scene.structures.iter().position(|s| &s.name == name);
+        let hidden = rendered.hidden.iter().find(|(n, _)| n == name);
+        let (Some(index), Some((_, hidden))) = (index, hidden) else {
+            continue;
+        };
+        // A structure the user hid keeps its region hidden too.
+        let shown_structure = shown.view.styles.get(index).is_none_or(|s| s.shown);
+        let (true, Some(region), Some(hidden)) = (shown_structure, region.get(c), hidden.get(c))
+        else {
+            continue;
+        };
+        let colour = crate::overlay::structure_colour(index);
+        let alpha = crate::overlay::region_alpha(hidden, region, shown.prefs.hidden_region_opacity);
+        for (px, a) in rgba.chunks_exact_mut(4).zip(alpha) {
+            let a = (a.clamp(0.0, 1.0) * 255.0) as u8;
+            if a > px[3] {
+                px.copy_from_slice(&[colour[0], colour[1], colour[2], a]);
+            }
+        }
+    }
+    Some(([w, h], rgba))
 }
 
 /// In the uncertainty view: the unpainted patch where the forest hesitates most (recomputed

@@ -215,6 +215,29 @@ impl FitConfig {
         within("placement.rounds", pl.rounds, 1..=50)?;
         within("placement.steps", pl.steps, 1..=100)?;
         within("placement.rebuild_every", pl.rebuild_every, 1..=1000)?;
-        non_negative("placement.pose_damping", pl.pose_damping)
+        non_negative("placement.pose_damping", pl.pose_damping)?;
+
+        let h = &self.hidden_region;
+        non_negative("hidden_region.covariance_scale", h.covariance_scale)?;
+        non_negative("hidden_region.model_error_mm", h.model_error_mm)?;
+        non_negative(
+            "hidden_region.model_error_per_rim_residual",
+            h.model_error_per_rim_residual,
+        )?;
+        positive("hidden_region.focal_sd", h.focal_sd)?;
+        positive("hidden_region.principal_sd_px", h.principal_sd_px)?;
+        non_negative(
+            "hidden_region.zoom_depth_sd_corrected",
+            h.zoom_depth_sd_corrected,
+        )?;
+        non_negative(
+            "hidden_region.zoom_depth_sd_uncorrected",
+            h.zoom_depth_sd_uncorrected,
+        )?;
+        within("hidden_region.probability", h.probability, 0.5..=0.999)?;
+        non_negative(
+            "hidden_region.lost_growth_mm_per_frame",
+            h.lost_growth_mm_per_frame,
+        )
     }
 }
