@@ -141,15 +141,18 @@ mod tests {
     /// centre towards the camera's axis: the ray meets the kidney at 120 mm and the tumour at
     /// 150 − 12 − 6 = 132 mm, so 12 mm deep, and 12 − r deep for the region (brute force:
     /// the analytic sphere hits, within the icosphere's facet error).
+    fn object(m: &Mesh) -> RenderObject<'_> {
+        RenderObject {
+            vertices: &m.vertices,
+            faces: &m.faces,
+            closed: true,
+        }
+    }
+
     #[test]
     fn the_margin_of_a_tumour_inside_a_sphere_matches_the_analytic_depths() {
         let kidney = sphere(DVec3::new(0.0, 0.0, 150.0), 30.0);
         let tumour = sphere(DVec3::new(0.0, 0.0, 138.0), 6.0);
-        let object = |m: &'_ Mesh| RenderObject {
-            vertices: &m.vertices,
-            faces: &m.faces,
-            closed: true,
-        };
         let (visible, hidden) = ([object(&kidney)], object(&tumour));
         let centroid = crate::geometry::mesh::vertex_mean(&tumour.vertices);
         let m = depth_margin(&visible, &hidden, centroid, 4.0).unwrap();

@@ -411,6 +411,7 @@ mod tests {
                 pose,
                 shape_modes: model.shape.mode_count(),
                 h: DMatrix::zeros(0, 0),
+                rim_residual_px: 0.0,
             };
             let j = centroid_jacobian(&ctx, &state, &deformed, &info, s);
             let mut columns = vec![(pose, 0usize, info.pose_columns())];
