@@ -106,7 +106,7 @@ pub fn region_alpha(hidden: &Mask, region: &Mask, opacity: f32) -> Vec<f32> {
         .iter()
         .zip(&d2.data)
         .filter(|(r, _)| **r)
-        .map(|(_, &d)| d as f32)
+        .map(|(_, &d)| d)
         .fold(0f32, f32::max)
         .sqrt()
         .max(1.0);
@@ -121,7 +121,7 @@ pub fn region_alpha(hidden: &Mask, region: &Mask, opacity: f32) -> Vec<f32> {
             alpha[i] = if edge {
                 if ((x + y) / 4) % 2 == 0 { 1.0 } else { 0.35 }
             } else {
-                let d = (d2.data[i] as f32).sqrt() / reach;
+                let d = d2.data[i].sqrt() / reach;
                 opacity * (1.0 - 0.67 * d.clamp(0.0, 1.0))
             };
         }

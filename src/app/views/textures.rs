@@ -9,6 +9,10 @@ use crate::appearance::hint::StrokeHint;
 use crate::scene::SEED_NONE;
 use egui::{ColorImage, TextureHandle, TextureOptions};
 
+/// A view's region texture and the (frame, document edits, opacity bits, shown styles) it
+/// was drawn for.
+type CachedRegion = ((usize, u64, u32, u64), Option<TextureHandle>);
+
 /// A view's stroke hint and the (frame, seed revision) it was found for.
 type CachedHint = ((usize, u64), Option<StrokeHint>);
 
@@ -23,7 +27,7 @@ pub struct Textures {
     pub probability_key: Option<(usize, Layer)>,
     pub(super) overlay_cpu: Vec<Option<(usize, TextureHandle)>>,
     /// Per camera: the hidden structures' regions for (frame, document edits, opacity).
-    region: Vec<Option<((usize, u64, u32, u64), Option<TextureHandle>)>>,
+    region: Vec<Option<CachedRegion>>,
     /// Per camera: where the next stroke helps most, for (frame, seed revision).
     hints: Vec<Option<CachedHint>>,
 }
