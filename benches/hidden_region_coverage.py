@@ -7,13 +7,16 @@ and the median radius per mode, on a tuning set and a held-out test set.
     cargo build --release && python3 benches/hidden_region_coverage.py [--set tuning|test|both]
         [--modes LSC,LS,L,R] [--keep DIR] [--calibrate]
 
-`--calibrate` (tuning set only) also searches the two constants the images cannot know,
-`hidden_region.covariance_scale` s and `hidden_region.model_error_mm` e: the covariance the
-tracker wrote with the constants it ran with is taken apart into its data part and rebuilt for
-each (s, e); the pair with the smallest median radius whose coverage is at least 95 % on the
-tuning frames is printed, to be made the default. The seeds below were fixed before any
-constant was chosen; the test set is never used to choose. Not part of CI: about half a
-minute per scene and mode on 2 cores.
+`--calibrate` (tuning set only) also searches the constants the images cannot know: each
+frame's covariance as the tracker wrote it is taken apart into its data part (the fit's own
+information carried to the centroid) with the constants it ran with (metrics.json's config), and
+rebuilt for each candidate: on LSC the covariance scale s, the model error e, its share of the
+unexplained rim k and the depth after a corrected zoom d; on LS, with s, e and k kept, the depth
+after a zoom the pose alone followed d_u and its share u of the depth the fit moved since the zoom
+began; on the lost frames the growth g. The candidates with the smallest median radius whose
+coverage is at least 95 % on the tuning frames are printed, to be made the defaults. The seeds
+below were fixed before any constant was chosen; the test set is never used to choose. Not part
+of CI: about half a minute per scene and mode on 2 cores.
 """
 
 import argparse
@@ -85,22 +88,10 @@ def make_scene(spec, work):
     return heldout.make_scene(spec, work, frames=FRAMES)
 
 
-# The data part alone: what the calibration rebuilds the region from.
-RAW = {"hidden_region": {"covariance_scale": 1.0, "model_error_mm": 0.0,
-                         "model_error_per_rim_residual": 0.0, "lost_growth_mm_per_frame": 0.0,
-                         "zoom_depth_sd_corrected": 0.0, "zoom_depth_sd_uncorrected": 0.0}}
-
-
-def track(scene, mode, work, tag, raw=False):
-    out = os.path.join(work, f"track-{tag}-{mode}" + ("-raw" if raw else ""))
+def track(scene, mode, work, tag):
+    out = os.path.join(work, f"track-{tag}-{mode}")
     if not os.path.exists(os.path.join(out, "metrics.json")):
-        args = [BIN, "track", scene, "--out", out, "--mode", mode]
-        if raw:
-            config = os.path.join(work, "raw-config.json")
-            with open(config, "w") as f:
-                json.dump(RAW, f)
-            args += ["--config", config]
-        run(args)
+        run([BIN, "track", scene, "--out", out, "--mode", mode])
     with open(os.path.join(out, "metrics.json")) as f:
         metrics = json.load(f)
     with open(os.path.join(out, "trajectory.json")) as f:
@@ -127,8 +118,12 @@ def track(scene, mode, work, tag, raw=False):
             rows.append({"err": err, "cov": region["centroid_cov_mm2"],
                          "radius": region["radius95_mm"], "lost": lost_run,
                          "rim": region.get("rim_residual_mm", 0.0),
+                         "zsd": region.get("zoom_depth_sd", 0.0),
+                         "zchange": region.get("zoom_depth_change"),
                          "c": fr["centroids"][name], "zoomed": zoomed})
     config = metrics.get("config", {}).get("fit", {}).get("hidden_region", {})
+    for row in rows:
+        row["data"] = data_part(row, config)
     return rows, metrics, config
 
 
@@ -183,15 +178,41 @@ def radius95(cov):
     return math.sqrt(q[math.ceil(0.95 * len(q)) - 1])
 
 
-def rebuilt(row, s, e, d, k=0.0, g=0.0):
-    """A raw row's covariance (data part alone) with the constants (s, e, d, k, g), as the
-    tracker builds it: s · data + (e² + (k · rim)²) I + d² c cᵀ after a zoom, + (g · n)² I
-    n frames into a loss. A lost frame's row holds the last good frame's data part and
-    centroid; its rim residual is that frame's too."""
-    c = row["c"]
-    dz = d if row["zoomed"] else 0.0
+def zoom_kind(row):
+    """None before any zoom, "corrected" after one the cameras followed, "uncorrected" after
+    one the pose alone followed (the tracker then writes the depth change)."""
+    if row["zchange"] is not None:
+        return "uncorrected"
+    return "corrected" if row["zsd"] > 0 else None
+
+
+def data_part(row, config):
+    """The covariance the fit's information gives (before the constants), taken back out of
+    what the tracker wrote: Σ = s · data + (e² + (k · rim)² + (g · n)²) I + zsd² c cᵀ, n frames
+    into a loss (a lost frame keeps the last good frame's data part, rim and zoom terms)."""
+    s = config.get("covariance_scale", 1.0)
+    e = config.get("model_error_mm", 0.0)
+    k = config.get("model_error_per_rim_residual", 0.0)
+    g = config.get("lost_growth_mm_per_frame", 0.0)
     diag = e * e + (k * row["rim"]) ** 2 + (g * row["lost"]) ** 2
-    return [[s * row["cov"][i][j] + (diag if i == j else 0) + dz * dz * c[i] * c[j]
+    c, z = row["c"], row["zsd"]
+    return [[(row["cov"][i][j] - (diag if i == j else 0) - z * z * c[i] * c[j]) / s
+             for j in range(3)] for i in range(3)]
+
+
+def rebuilt(row, s, e, k, d_c, d_u, u, g):
+    """A row's covariance rebuilt from its data part with the constants, as the tracker builds
+    it."""
+    c = row["c"]
+    kind = zoom_kind(row)
+    if kind == "corrected":
+        z2 = d_c * d_c
+    elif kind == "uncorrected":
+        z2 = d_u * d_u + (u * row["zchange"]) ** 2
+    else:
+        z2 = 0.0
+    diag = e * e + (k * row["rim"]) ** 2 + (g * row["lost"]) ** 2
+    return [[s * row["data"][i][j] + (diag if i == j else 0) + z2 * c[i] * c[j]
              for j in range(3)] for i in range(3)]
 
 
@@ -199,35 +220,63 @@ def inside(row, radius):
     return math.sqrt(sum(v * v for v in row["err"])) <= radius
 
 
-def coverage(rows, *constants):
-    radii = [radius95(rebuilt(r, *constants)) for r in rows]
+def coverage(rows, constants):
+    radii = [radius95(rebuilt(r, **constants)) for r in rows]
     cover = sum(inside(r, rad) for r, rad in zip(rows, radii)) / len(rows)
     return cover, statistics.median(radii)
 
 
-def calibrate(rows, ds):
-    """The (s, e, d, k) with the smallest median radius whose coverage of the frames tracked
-    is at least 95 %, then the lost-frame growth g: the smallest on its grid whose coverage of
-    the lost frames is at least 95 % (or the largest)."""
-    good = [r for r in rows if not r["lost"]]
-    lost = [r for r in rows if r["lost"]]
+def smallest(rows, grid, base):
+    """The constants on `grid` (name -> values, the rest from `base`) with the smallest median
+    radius whose coverage of `rows` is at least 95 %; None if none reaches it."""
+    names = list(grid)
     best = None
-    for s in [0.5, 1, 2, 4, 8, 16]:
-        for e in [0.0, 0.5, 0.75, 1.0, 1.25, 1.5, 2.0]:
-            for d in ds:
-                for k in [0.0, 0.5, 1.0, 1.5, 2.0, 3.0]:
-                    cover, med = coverage(good, s, e, d, k)
-                    if cover >= 0.95 and (best is None or med < best[4]):
-                        best = (s, e, d, k, med, cover)
-    if best is None:
-        return None
-    g_grid = [0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0]
-    g = g_grid[-1]
-    for cand in g_grid:
-        if lost and coverage(lost, *best[:4], cand)[0] >= 0.95:
-            g = cand
+
+    def walk(i, chosen):
+        nonlocal best
+        if i == len(names):
+            constants = dict(base, **chosen)
+            cover, med = coverage(rows, constants)
+            if cover >= 0.95 and (best is None or med < best[1]):
+                best = (constants, med, cover)
+            return
+        for v in grid[names[i]]:
+            walk(i + 1, dict(chosen, **{names[i]: v}))
+
+    walk(0, {})
+    return best
+
+
+def calibrate(rows_by_mode, config):
+    """LSC: s, e, k, d_c on its tracked frames; LS: d_u and u with those kept; then g on the
+    lost frames of both. Returns the constants and what they give per mode."""
+    base = {"s": config.get("covariance_scale", 1.0), "e": config.get("model_error_mm", 0.0),
+            "k": config.get("model_error_per_rim_residual", 0.0),
+            "d_c": config.get("zoom_depth_sd_corrected", 0.0),
+            "d_u": config.get("zoom_depth_sd_uncorrected", 0.0),
+            "u": config.get("zoom_depth_per_depth_change", 0.0),
+            "g": config.get("lost_growth_mm_per_frame", 0.0)}
+    tracked = {m: [r for r in rows if not r["lost"]] for m, rows in rows_by_mode.items()}
+    if "LSC" in tracked:
+        found = smallest(tracked["LSC"], {
+            "s": [0.25, 0.5, 1, 2, 4, 8], "e": [0.0, 0.5, 0.75, 1.0, 1.25, 1.5],
+            "k": [0.0, 1.0, 2.0, 3.0], "d_c": [0.0, 0.005, 0.01, 0.015, 0.02]}, base)
+        if found is None:
+            return None
+        base = found[0]
+    if "LS" in tracked:
+        found = smallest(tracked["LS"], {
+            "d_u": [0.0, 0.01, 0.02, 0.03, 0.04, 0.06],
+            "u": [0.0, 0.25, 0.5, 0.75, 1.0, 1.25, 1.5]}, base)
+        if found is None:
+            return None
+        base = found[0]
+    lost = [r for rows in rows_by_mode.values() for r in rows if r["lost"]]
+    for g in [0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0]:
+        base = dict(base, g=g)
+        if lost and coverage(lost, base)[0] >= 0.95:
             break
-    return best + (g, coverage(rows, *best[:4], g), len(lost))
+    return base, {m: coverage(rows, base) for m, rows in rows_by_mode.items()}, len(lost)
 
 
 def main():
@@ -247,40 +296,34 @@ def main():
     print("| set | mode | frames | coverage (95 % sphere) | median radius (mm) | mean centroid error (mm) | worst (mm) |")
     print("|---|---|---|---|---|---|---|")
     for name in chosen:
+        rows_by_mode, config = {}, {}
         for mode in modes:
-            rows, config = [], {}
-            # Calibrating needs the data part alone (the "raw" runs); the tracked figures
-            # with the chosen constants come from a plain run after they are made defaults.
-            for spec in sets[name] if not (args.calibrate and name == "tuning") else []:
-                scene = make_scene(spec, work)
-                r, _, config = track(scene, mode, work, spec[0])
+            rows = []
+            for spec in sets[name]:
+                r, _, config = track(make_scene(spec, work), mode, work, spec[0])
                 rows.extend(r)
-            if not rows and not args.calibrate:
+            rows_by_mode[mode] = rows
+            if not rows:
                 print(f"| {name} | {mode} | 0 | – | – | – | – |")
                 continue
-            if rows:
-                cover = sum(inside(r, r["radius"]) for r in rows) / len(rows)
-                errs = [math.sqrt(sum(v * v for v in r["err"])) for r in rows]
-                print(f"| {name} | {mode} | {len(rows)} | {100 * cover:.1f} % | "
-                      f"{statistics.median(r['radius'] for r in rows):.2f} | "
-                      f"{statistics.mean(errs):.2f} | {max(errs):.2f} |", flush=True)
-            if args.calibrate and name == "tuning":
-                raw = []
-                for spec in sets[name]:
-                    r, _, _ = track(make_scene(spec, work), mode, work, spec[0], raw=True)
-                    raw.extend(r)
-                ds = [0.0, 0.01, 0.015, 0.02, 0.025, 0.03, 0.04] if mode == "LSC" \
-                    else [0.0, 0.02, 0.04, 0.06, 0.08, 0.1, 0.12, 0.15]
-                best = calibrate(raw, ds)
-                if best:
-                    s_, e_, d_, k_, med, cover, g_, (all_cover, all_med), n_lost = best
-                    print(f"  calibrated on {mode}: covariance_scale {s_}, model_error_mm {e_}, "
-                          f"zoom depth sd {d_}, model_error_per_rim_residual {k_}: coverage "
-                          f"{100 * cover:.1f} %, median radius {med:.2f} mm (tracked frames); "
-                          f"lost_growth_mm_per_frame {g_} over {n_lost} lost frames; all "
-                          f"frames {100 * all_cover:.1f} %, median {all_med:.2f} mm", flush=True)
-                else:
-                    print(f"  calibrated on {mode}: nothing on the grid reaches 95 %")
+            cover = sum(inside(r, r["radius"]) for r in rows) / len(rows)
+            errs = [math.sqrt(sum(v * v for v in r["err"])) for r in rows]
+            print(f"| {name} | {mode} | {len(rows)} | {100 * cover:.1f} % | "
+                  f"{statistics.median(r['radius'] for r in rows):.2f} | "
+                  f"{statistics.mean(errs):.2f} | {max(errs):.2f} |", flush=True)
+        if args.calibrate and name == "tuning":
+            found = calibrate({m: r for m, r in rows_by_mode.items() if r}, config)
+            if found is None:
+                print("  calibration: nothing on the grid reaches 95 %")
+                continue
+            constants, per_mode, n_lost = found
+            print("  calibrated: covariance_scale {s}, model_error_mm {e}, "
+                  "model_error_per_rim_residual {k}, zoom_depth_sd_corrected {d_c}, "
+                  "zoom_depth_sd_uncorrected {d_u}, zoom_depth_per_depth_change {u}, "
+                  "lost_growth_mm_per_frame {g}".format(**constants) + f" ({n_lost} lost frames)")
+            for m, (cover, med) in per_mode.items():
+                print(f"  with them, tuning {m}: coverage {100 * cover:.1f} %, median radius "
+                      f"{med:.2f} mm", flush=True)
     if not args.keep:
         print(f"(scenes and results in {work})")
 

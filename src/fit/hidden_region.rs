@@ -48,8 +48,13 @@ pub struct HiddenRegionConfig {
     /// on the calibration scenes); the lines' information claims to tell them apart by
     /// perspective, which deformation the model does not span fakes.
     pub zoom_depth_sd_corrected: f64,
-    /// ... in a mode that does not (R, L, LS): depth took the whole zoom's place.
+    /// ... in a mode that does not (R, L, LS): depth took the zoom's place.
     pub zoom_depth_sd_uncorrected: f64,
+    /// ... and there, how much of the depth the fit moved since the zoom began may be the
+    /// zoom's (relative standard deviation per relative change of the hidden structures'
+    /// depth): a zoom the pose alone followed shows as the organ coming closer or going away
+    /// by as much as the lens zoomed, and undoing the zoom brings it back.
+    pub zoom_depth_per_depth_change: f64,
     /// The probability the region holds (0.95: `radius95_mm`).
     pub probability: f64,
     /// A lost frame keeps the last good state while the organ moves on: its region widens by
@@ -72,6 +77,7 @@ impl Default for HiddenRegionConfig {
             principal_sd_px: 2.0,
             zoom_depth_sd_corrected: 0.01,
             zoom_depth_sd_uncorrected: 0.04,
+            zoom_depth_per_depth_change: 0.5,
             probability: 0.95,
             lost_growth_mm_per_frame: 8.0,
         }
@@ -91,6 +97,11 @@ pub struct HiddenRegion {
     pub radius_mm: f64,
     /// The fit's unexplained rim at the centroid's depth (mm; [`Information::rim_residual_px`]).
     pub rim_residual_mm: f64,
+    /// The relative standard deviation of depth along camera 0's ray that a zoom added.
+    pub zoom_depth_sd: f64,
+    /// After a zoom the pose alone followed: the relative change of the hidden structures'
+    /// depth since it began (None otherwise).
+    pub zoom_depth_change: Option<f64>,
     /// How deep it lies under the visible surface along camera 0's line of sight.
     pub margin: Option<super::depth_margin::DepthMargin>,
 }
@@ -107,6 +118,8 @@ impl HiddenRegion {
             centroid_cov_mm2: self.covariance_mm2,
             radius95_mm: self.radius_mm,
             rim_residual_mm: Some(self.rim_residual_mm),
+            zoom_depth_sd: (self.zoom_depth_sd > 0.0).then_some(self.zoom_depth_sd),
+            zoom_depth_change: self.zoom_depth_change,
             depth_mm: self.margin.map(|m| m.fitted_mm),
             margin95_mm: self.margin.map(|m| m.region_mm),
             surface_mm: self.margin.map(|m| m.surface_mm),
@@ -115,14 +128,49 @@ impl HiddenRegion {
 }
 
 /// What the cameras did up to a frame, as far as depth is concerned.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub enum ZoomHistory {
     /// No zoom yet: the intrinsics are as calibrated.
     None,
     /// A zoom, followed by the camera correction (LSC).
     Corrected,
-    /// A zoom the pose alone followed (R, L, LS, or a refused correction).
-    Uncorrected,
+    /// A zoom the pose alone followed (R, L, LS, or a refused correction), and the mean depth
+    /// (camera-0 z, mm) of the hidden structures' centroids before it began (None until known).
+    Uncorrected { reference_depth_mm: Option<f64> },
+}
+
+impl ZoomHistory {
+    /// The history after a frame inside a zoom, `corrected` when the cameras followed it;
+    /// `regions` are the last good frame's (their depth is the reference of a zoom the pose
+    /// alone follows). Once a zoom went uncorrected, the depth stays as loose as that.
+    pub fn after_zoom_frame(self, corrected: bool, regions: &[HiddenRegion]) -> Self {
+        match (self, corrected) {
+            (ZoomHistory::Uncorrected { .. }, _) => self,
+            (_, false) => ZoomHistory::Uncorrected {
+                reference_depth_mm: mean_depth_mm(regions.iter().map(|r| r.centroid_mm)),
+            },
+            _ => ZoomHistory::Corrected,
+        }
+    }
+
+    /// The history once this frame's `regions` are known: a reference still missing (the
+    /// zoom began on the first frame) becomes theirs.
+    pub fn with_reference(self, regions: &[HiddenRegion]) -> Self {
+        match self {
+            ZoomHistory::Uncorrected {
+                reference_depth_mm: None,
+            } => ZoomHistory::Uncorrected {
+                reference_depth_mm: mean_depth_mm(regions.iter().map(|r| r.centroid_mm)),
+            },
+            other => other,
+        }
+    }
+}
+
+/// The mean camera-0 depth (mm) of some centroids; None for none.
+fn mean_depth_mm(centroids: impl Iterator<Item = DVec3>) -> Option<f64> {
+    let (sum, n) = centroids.fold((0.0, 0usize), |(s, n), c| (s + c.z, n + 1));
+    (n > 0).then(|| sum / n as f64)
 }
 
 /// The regions of every hidden structure at `state`, from the fit's information and what the
@@ -140,18 +188,34 @@ pub fn hidden_regions(
         return Vec::new();
     }
     let covariance = parameter_covariance(state, info, config);
-    let depth_sd = match zoom {
-        ZoomHistory::None => 0.0,
-        ZoomHistory::Corrected => config.zoom_depth_sd_corrected,
-        ZoomHistory::Uncorrected => config.zoom_depth_sd_uncorrected,
-    };
     let deformed = model.deformed(&state.shape);
+    let posed: Vec<DVec3> = hidden
+        .iter()
+        .map(|&s| {
+            state
+                .affine
+                .apply(crate::geometry::mesh::vertex_mean(&deformed[s]))
+        })
+        .collect();
+    let (depth_sd, depth_change) = match zoom {
+        ZoomHistory::None => (0.0, None),
+        ZoomHistory::Corrected => (config.zoom_depth_sd_corrected, None),
+        ZoomHistory::Uncorrected { reference_depth_mm } => {
+            let now = mean_depth_mm(posed.iter().copied());
+            let change = match (now, reference_depth_mm) {
+                (Some(now), Some(before)) if before.abs() > 1e-9 => (now / before - 1.0).abs(),
+                _ => 0.0,
+            };
+            let sd = config
+                .zoom_depth_sd_uncorrected
+                .hypot(config.zoom_depth_per_depth_change * change);
+            (sd, Some(change))
+        }
+    };
     hidden
         .into_iter()
-        .map(|s| {
-            let posed = state
-                .affine
-                .apply(crate::geometry::mesh::vertex_mean(&deformed[s]));
+        .zip(posed)
+        .map(|(s, posed)| {
             let j = centroid_jacobian(ctx, state, &deformed, info, s);
             let data = match &covariance {
                 Some(c) => &j * c * j.transpose(),
@@ -179,6 +243,8 @@ pub fn hidden_regions(
                 covariance_mm2: std::array::from_fn(|r| std::array::from_fn(|q| cov[(r, q)])),
                 radius_mm: radius(&cov, config.probability),
                 rim_residual_mm,
+                zoom_depth_sd: depth_sd,
+                zoom_depth_change: depth_change,
                 margin: None,
             }
         })
@@ -548,9 +614,23 @@ mod tests {
         );
         // After a zoom the region can only widen, the more where the pose alone followed it.
         let corrected = hidden_regions(&ctx, &state, &info, ZoomHistory::Corrected, &cfg);
-        let uncorrected = hidden_regions(&ctx, &state, &info, ZoomHistory::Uncorrected, &cfg);
+        let at = |reference_depth_mm| {
+            hidden_regions(
+                &ctx,
+                &state,
+                &info,
+                ZoomHistory::Uncorrected { reference_depth_mm },
+                &cfg,
+            )
+        };
+        let uncorrected = at(Some(r.centroid_mm.z));
         assert!(corrected[0].radius_mm > r.radius_mm);
         assert!(uncorrected[0].radius_mm > corrected[0].radius_mm);
+        // The more depth moved since the zoom began, the wider along the ray.
+        let moved = at(Some(r.centroid_mm.z * 1.1));
+        assert!((moved[0].zoom_depth_change.unwrap() - 1.0 / 1.1 + 1.0).abs() < 1e-9);
+        assert!(moved[0].radius_mm > uncorrected[0].radius_mm + 0.04 * r.centroid_mm.length());
+        assert_eq!(at(None)[0].radius_mm, uncorrected[0].radius_mm);
     }
 
     /// The radius of an isotropic Gaussian is σ √χ²₃(0.95) = 2.7955 σ, and of a Gaussian

@@ -582,11 +582,9 @@ pub fn track(
             refused,
         } = tracker.frame(t, &mut views)?;
         if zoom_uncertain {
-            // Once a zoom went uncorrected, the depth stays as loose as that.
-            tracker.zoom_history = match (tracker.zoom_history, zoom_corrected) {
-                (ZoomHistory::Uncorrected, _) | (_, false) => ZoomHistory::Uncorrected,
-                _ => ZoomHistory::Corrected,
-            };
+            tracker.zoom_history = tracker
+                .zoom_history
+                .after_zoom_frame(zoom_corrected, &tracker.regions);
         }
         if let (false, Some(info)) = (lost, &fit.information) {
             tracker.regions = hidden_regions(
@@ -596,6 +594,7 @@ pub fn track(
                 tracker.zoom_history,
                 &options.config.hidden_region,
             );
+            tracker.zoom_history = tracker.zoom_history.with_reference(&tracker.regions);
         }
         let ms = started.elapsed().as_secs_f64() * 1e3;
         let Rendered {

@@ -112,6 +112,14 @@ pub struct HiddenRegionEntry {
     /// The fit's unexplained rim at the centroid's depth (mm), which widens the region.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub rim_residual_mm: Option<f64>,
+    /// The relative standard deviation of depth along camera 0's ray that a zoom added
+    /// (absent before any zoom).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub zoom_depth_sd: Option<f64>,
+    /// After a zoom the pose alone followed: the relative change of the hidden structures'
+    /// depth since it began.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub zoom_depth_change: Option<f64>,
     /// Along camera 0's line of sight through the fitted centroid: the distance from the
     /// camera to the visible surface, from there to the fitted structure, and to the
     /// nearest point of its 95 % region (mm); absent where that line meets no visible surface.

@@ -309,31 +309,39 @@ fn hidden_structures(shown: &Shown, ui: &mut egui::Ui, prefs: &mut crate::app::s
         if s.visible {
             continue;
         }
-        ui.horizontal(|ui| {
+        let entry = result.and_then(|r| r.hidden_region.get(&s.name));
+        let lost = result.is_some_and(|r| r.lost);
+        ui.horizontal_wrapped(|ui| {
             swatch(ui, structure_colour(i));
             ui.label(RichText::new(&s.name).strong());
+            match entry {
+                Some(entry) => {
+                    ui.label(format!(
+                        "within {:.1} mm (95 %){}",
+                        entry.radius95_mm,
+                        if lost { ", frame lost" } else { "" }
+                    ))
+                    .on_hover_text(
+                        "The true centre lies inside a sphere of this radius about the fitted \
+                         one in 95 % of frames: the fit's own uncertainty (what the silhouettes \
+                         leave open of the pose, the shape and the cameras) plus a calibrated \
+                         allowance for deformation the shape model does not span; widened on a \
+                         lost frame. The halo in the views is the structure moved anywhere \
+                         inside it.",
+                    );
+                }
+                None => {
+                    ui.label(RichText::new("not fitted at this frame").weak());
+                }
+            }
         });
-        let Some(entry) = result.and_then(|r| r.hidden_region.get(&s.name)) else {
-            ui.label(RichText::new("not fitted at this frame").weak());
+        let Some(entry) = entry else {
             continue;
         };
-        let lost = result.is_some_and(|r| r.lost);
-        ui.label(format!(
-            "within {:.1} mm of the fitted centre (95 %){}",
-            entry.radius95_mm,
-            if lost { ", widened: frame lost" } else { "" }
-        ))
-        .on_hover_text(
-            "The true centre lies inside a sphere of this radius about the fitted one in 95 % \
-             of frames: the fit's own uncertainty (what the silhouettes leave open of the \
-             pose, the shape and the cameras) plus a calibrated allowance for deformation the \
-             shape model does not span. The halo in the views is the tumour moved anywhere \
-             inside it.",
-        );
         match (entry.depth_mm, entry.margin95_mm) {
             (Some(depth), Some(margin)) => {
                 ui.label(format!(
-                    "under the surface: {depth:.1} mm fitted, at least {margin:.1} mm (95 %)"
+                    "{depth:.1} mm under the surface, at least {margin:.1} mm (95 %)"
                 ))
                 .on_hover_text(
                     "Along the first camera's line of sight through the fitted centre: from the \

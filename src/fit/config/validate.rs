@@ -234,6 +234,10 @@ impl FitConfig {
             "hidden_region.zoom_depth_sd_uncorrected",
             h.zoom_depth_sd_uncorrected,
         )?;
+        non_negative(
+            "hidden_region.zoom_depth_per_depth_change",
+            h.zoom_depth_per_depth_change,
+        )?;
         within("hidden_region.probability", h.probability, 0.5..=0.999)?;
         non_negative(
             "hidden_region.lost_growth_mm_per_frame",
