@@ -66,18 +66,21 @@ pub struct HiddenRegionConfig {
 impl Default for HiddenRegionConfig {
     fn default() -> Self {
         Self {
-            // Calibrated on benches/hidden_region_coverage.py's tuning scenes (501-506 and
-            // 601-608, LSC): the smallest median radius on its grid with 95 % coverage of the
-            // tracked frames (s, e, k, d corrected); d uncorrected the same on LS; the lost
-            // growth the smallest reaching 95 % of the lost frames (8: the grid's top).
-            covariance_scale: 0.5,
-            model_error_mm: 1.0,
+            // Calibrated by `benches/hidden_region_coverage.py --set tuning --calibrate` on its
+            // 24 tuning scenes (501-506, 601-608, 701-710; 408 frames per mode): on LSC the
+            // smallest median radius on its grid with 95 % coverage of the tracked frames
+            // (s, e, k, d corrected); on LS, those kept, the depth terms of a zoom the pose
+            // alone followed (its share of the depth moved since the zoom began: all of it);
+            // the lost growth the smallest reaching 95 % of the 14 lost frames (8: the grid's
+            // top). The test scenes (801-812) were fixed before and are only reported.
+            covariance_scale: 8.0,
+            model_error_mm: 0.75,
             model_error_per_rim_residual: 2.0,
             focal_sd: 0.005,
             principal_sd_px: 2.0,
             zoom_depth_sd_corrected: 0.01,
-            zoom_depth_sd_uncorrected: 0.04,
-            zoom_depth_per_depth_change: 0.5,
+            zoom_depth_sd_uncorrected: 0.0,
+            zoom_depth_per_depth_change: 1.0,
             probability: 0.95,
             lost_growth_mm_per_frame: 8.0,
         }
@@ -612,7 +615,8 @@ mod tests {
             "{}",
             r.radius_mm
         );
-        // After a zoom the region can only widen, the more where the pose alone followed it.
+        // After a zoom the region can only widen; where the pose alone followed it, by as much
+        // as the fit moved the depth since.
         let corrected = hidden_regions(&ctx, &state, &info, ZoomHistory::Corrected, &cfg);
         let at = |reference_depth_mm| {
             hidden_regions(
@@ -625,7 +629,7 @@ mod tests {
         };
         let uncorrected = at(Some(r.centroid_mm.z));
         assert!(corrected[0].radius_mm > r.radius_mm);
-        assert!(uncorrected[0].radius_mm > corrected[0].radius_mm);
+        assert!(uncorrected[0].radius_mm >= r.radius_mm);
         // The more depth moved since the zoom began, the wider along the ray.
         let moved = at(Some(r.centroid_mm.z * 1.1));
         assert!((moved[0].zoom_depth_change.unwrap() - 1.0 / 1.1 + 1.0).abs() < 1e-9);
