@@ -340,9 +340,11 @@ fn hidden_structures(shown: &Shown, ui: &mut egui::Ui, prefs: &mut crate::app::s
         };
         match (entry.depth_mm, entry.margin95_mm) {
             (Some(depth), Some(margin)) => {
-                ui.label(format!(
-                    "{depth:.1} mm under the surface, at least {margin:.1} mm (95 %)"
-                ))
+                ui.label(if margin < 0.05 {
+                    format!("{depth:.1} mm under the surface; its region may reach it")
+                } else {
+                    format!("{depth:.1} mm under the surface, at least {margin:.1} mm (95 %)")
+                })
                 .on_hover_text(
                     "Along the first camera's line of sight through the fitted centre: from the \
                      visible surface to the fitted structure, and to the nearest point of its \

@@ -176,10 +176,11 @@ pub fn timeline(shown: &Shown, layout: &mut Layout, ui: &mut egui::Ui) {
                 // side panel's section may be scrolled out of sight.
                 for (name, region) in &r.hidden_region {
                     ui.separator();
-                    let depth = region
-                        .margin95_mm
-                        .map(|m| format!(", ≥ {m:.1} mm deep"))
-                        .unwrap_or_default();
+                    let depth = match region.margin95_mm {
+                        Some(m) if m < 0.05 => ", may reach the surface".to_string(),
+                        Some(m) => format!(", ≥ {m:.1} mm deep"),
+                        None => String::new(),
+                    };
                     ui.label(format!(
                         "{name} within {:.1} mm (95 %){depth}",
                         region.radius95_mm
