@@ -99,7 +99,7 @@ fn the_hidden_region_is_written_and_holds_the_true_tumour() {
     );
     assert!(
         (h["radius95_mm_median"].as_f64().unwrap() - median).abs() < 1e-6 * median.max(1.0) + 1e-9
-            || radii.len() % 2 == 0,
+            || radii.len().is_multiple_of(2),
         "{h}"
     );
     // The region's projection holds the fitted tumour's and is wider.
