@@ -632,7 +632,7 @@ mod tests {
         assert!(uncorrected[0].radius_mm >= r.radius_mm);
         // The more depth moved since the zoom began, the wider along the ray.
         let moved = at(Some(r.centroid_mm.z * 1.1));
-        assert!((moved[0].zoom_depth_change.unwrap() - 1.0 / 1.1 + 1.0).abs() < 1e-9);
+        assert!((moved[0].zoom_depth_change.unwrap() - (1.0 - 1.0 / 1.1)).abs() < 1e-9);
         assert!(moved[0].radius_mm > uncorrected[0].radius_mm + 0.04 * r.centroid_mm.length());
         assert_eq!(at(None)[0].radius_mm, uncorrected[0].radius_mm);
     }
