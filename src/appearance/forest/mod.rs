@@ -94,6 +94,21 @@ struct Node {
     child: u32,
 }
 
+impl Node {
+    fn split(feature: u16, threshold: u8, child: u32) -> Self {
+        Self {
+            feature,
+            threshold,
+            child,
+        }
+    }
+
+    /// A leaf at index `at` (it steps onto itself).
+    fn leaf(at: u32) -> Self {
+        Self::split(0, u8::MAX, at)
+    }
+}
+
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 struct Tree {
     nodes: Vec<Node>,
@@ -141,6 +156,8 @@ pub enum TreeError {
     Split { node: usize },
     #[error("leaf {node} is malformed")]
     Leaf { node: usize },
+    #[error("a path is longer than the tree's depth")]
+    Depth,
 }
 
 impl TryFrom<ForestData> for Forest {
@@ -186,7 +203,10 @@ impl Forest {
 
     /// Probabilities of many pixels: `classes` values per pixel, row after row.
     pub fn predict_many(&self, features: &[FeatureVector]) -> Vec<f32> {
-        const BLOCK: usize = 1024;
+        // Pixels per task: each tree walks them all while it is in cache (256: their features,
+        // 18 KB, stay in L1 beside the tree; 1024 gave 6.4 against 7.2 million pixels a second
+        // on the forest bench).
+        const BLOCK: usize = 256;
         const LANES: usize = 16;
         let k = self.classes;
         let mut out = vec![0f32; features.len() * k];
@@ -271,17 +291,29 @@ impl Tree {
         }
     }
 
-    /// Checks the invariants `step` relies on.
+    /// Checks the invariants the walks rely on: every index in range, a leaf's feature
+    /// included (a leaf steps onto itself, reading it); a split's children after it, so every
+    /// walk goes forward and ends at a leaf; no path longer than `depth` (the lockstep walk
+    /// takes at most that many steps before it reads the leaves).
     fn check(&self, classes: usize) -> Result<(), TreeError> {
         let n = self.nodes.len();
         if n == 0 || self.leaf_of.len() != n {
             return Err(TreeError::Shape);
         }
+        // The longest path from the root to each node (children come after their parents).
+        let mut level = vec![0u32; n];
         for (i, node) in self.nodes.iter().enumerate() {
+            if node.feature as usize >= FEATURE_COUNT {
+                return Err(TreeError::Split { node: i });
+            }
             match self.leaf_of[i] {
                 INTERNAL => {
-                    if node.feature as usize >= FEATURE_COUNT || node.child as usize + 1 >= n {
+                    let child = node.child as usize;
+                    if child <= i || child + 1 >= n {
                         return Err(TreeError::Split { node: i });
+                    }
+                    for c in [child, child + 1] {
+                        level[c] = level[c].max(level[i] + 1);
                     }
                 }
                 at => {
@@ -290,6 +322,9 @@ impl Tree {
                         || at as usize + classes > self.leaves.len()
                     {
                         return Err(TreeError::Leaf { node: i });
+                    }
+                    if level[i] > self.depth {
+                        return Err(TreeError::Depth);
                     }
                 }
             }
@@ -424,6 +459,35 @@ mod tests {
         let mut v: serde_json::Value = serde_json::from_str(&json).unwrap();
         v["trees"][0]["nodes"][0]["feature"] = 200.into();
         assert!(serde_json::from_value::<Forest>(v).is_err());
+        // A file must not make a walk read outside a pixel's features, loop, or stop short of
+        // a leaf: a leaf's feature out of range, a split pointing back, a depth too small.
+        let leaf = v_leaf(&json);
+        let mut v: serde_json::Value = serde_json::from_str(&json).unwrap();
+        v["trees"][0]["nodes"][leaf]["feature"] = 60000.into();
+        assert!(serde_json::from_value::<Forest>(v).is_err());
+        let mut v: serde_json::Value = serde_json::from_str(&json).unwrap();
+        let last_split = (0..leaf)
+            .rev()
+            .find(|&i| v["trees"][0]["leaf_of"][i].as_u64() == Some(INTERNAL as u64));
+        if let Some(i) = last_split.filter(|&i| i > 0) {
+            v["trees"][0]["nodes"][i]["child"] = 0.into();
+            assert!(serde_json::from_value::<Forest>(v).is_err());
+        }
+        let mut v: serde_json::Value = serde_json::from_str(&json).unwrap();
+        v["trees"][0]["depth"] = 0.into();
+        let err = serde_json::from_value::<Forest>(v).unwrap_err().to_string();
+        assert!(err.contains("depth"), "{err}");
+    }
+
+    /// The index of tree 0's first leaf in a serialised forest.
+    fn v_leaf(json: &str) -> usize {
+        let v: serde_json::Value = serde_json::from_str(json).unwrap();
+        v["trees"][0]["leaf_of"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .position(|l| l.as_u64() != Some(INTERNAL as u64))
+            .unwrap()
     }
 
     #[test]

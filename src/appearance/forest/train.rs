@@ -254,20 +254,12 @@ impl TreeBuilder<'_> {
         self.tree
             .leaves
             .extend(counts.iter().map(|c| (c / total) as f32));
-        self.tree.nodes[node] = Node {
-            feature: 0,
-            threshold: u8::MAX,
-            child: node as u32,
-        };
+        self.tree.nodes[node] = Node::leaf(node as u32);
         self.tree.leaf_of[node] = start;
     }
 
     fn push_node(&mut self) -> usize {
-        self.tree.nodes.push(Node {
-            feature: 0,
-            threshold: u8::MAX,
-            child: 0,
-        });
+        self.tree.nodes.push(Node::leaf(0));
         self.tree.leaf_of.push(INTERNAL);
         self.tree.nodes.len() - 1
     }
@@ -389,11 +381,7 @@ impl TreeBuilder<'_> {
         }
         let child = self.push_node();
         self.push_node();
-        self.tree.nodes[node] = Node {
-            feature: feature as u16,
-            threshold,
-            child: child as u32,
-        };
+        self.tree.nodes[node] = Node::split(feature as u16, threshold, child as u32);
         let (l, r) = idx.split_at_mut(split);
         self.grow(child, l, depth + 1);
         self.grow(child + 1, r, depth + 1);
