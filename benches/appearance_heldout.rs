@@ -20,7 +20,9 @@
 
 use endofuse::appearance::features::FeatureVector;
 use endofuse::appearance::forest::argmax;
-use endofuse::appearance::{Forest, ForestParams, FrameFeatures, Samples};
+use endofuse::appearance::{
+    Forest, ForestParams, FrameFeatures, PROBABILITY_SMOOTHING_SIGMA_PX, ProbabilityMaps, Samples,
+};
 use endofuse::plane::{LabelImage, Plane};
 use endofuse::rng::Rng;
 use endofuse::synth::seeds::{CLEARANCE_PX, paint_strokes};
@@ -109,6 +111,8 @@ struct Variant {
     features: fn(&RgbImage) -> Vec<FeatureVector>,
     /// Leave pixels the variant calls specular out of training.
     skip_specular: bool,
+    /// Probabilities smoothed by a Gaussian of this σ (px) before the argmax (0: none).
+    smooth_px: f32,
 }
 
 fn production(img: &RgbImage) -> Vec<FeatureVector> {
@@ -150,19 +154,28 @@ fn grey_world_production(img: &RgbImage) -> Vec<FeatureVector> {
 
 const VARIANTS: &[Variant] = &[
     Variant {
-        name: "features as shipped (highlights left out of training)",
+        name: "as shipped (highlights left out of training, probabilities smoothed)",
         features: production,
         skip_specular: true,
+        smooth_px: PROBABILITY_SMOOTHING_SIGMA_PX,
     },
     Variant {
-        name: "highlights kept",
+        name: "probabilities per pixel (not smoothed)",
+        features: production,
+        skip_specular: true,
+        smooth_px: 0.0,
+    },
+    Variant {
+        name: "highlights kept, not smoothed",
         features: production,
         skip_specular: false,
+        smooth_px: 0.0,
     },
     Variant {
         name: "+ grey-world colour constancy",
         features: grey_world_production,
         skip_specular: true,
+        smooth_px: PROBABILITY_SMOOTHING_SIGMA_PX,
     },
 ];
 
@@ -183,8 +196,21 @@ fn samples(frames: &[&Frame], feats: &[&Vec<FeatureVector>], skip_specular: bool
 }
 
 /// Kidney Dice of the forest's argmax on `frame`'s pixels (unpainted ones only when `unpainted`).
-fn dice(forest: &Forest, frame: &Frame, fv: &[FeatureVector], unpainted: bool) -> f64 {
-    let probs = forest.predict_many(fv);
+fn dice(
+    forest: &Forest,
+    frame: &Frame,
+    fv: &[FeatureVector],
+    unpainted: bool,
+    smooth_px: f32,
+) -> f64 {
+    let probs = ProbabilityMaps {
+        width: frame.strokes.width,
+        height: frame.strokes.height,
+        classes: 2,
+        data: forest.predict_many(fv),
+    }
+    .smoothed(smooth_px)
+    .data;
     let (mut inter, mut a, mut b) = (0usize, 0usize, 0usize);
     for (i, &truth) in frame.kidney.iter().enumerate() {
         if unpainted && frame.strokes.data[i] != 0 {
@@ -233,7 +259,7 @@ fn evaluate(variant: &Variant, set: &[&Frame]) -> (f64, f64) {
     let mut same = Vec::new();
     for (f, fv) in set.iter().zip(&feats) {
         let forest = train(&samples(&[f], &[fv], variant.skip_specular));
-        same.push(dice(&forest, f, fv, true));
+        same.push(dice(&forest, f, fv, true, variant.smooth_px));
     }
     // Strokes on three frames in turn (each rotation of the set), Dice on the others.
     let n = set.len();
@@ -244,7 +270,7 @@ fn evaluate(variant: &Variant, set: &[&Frame]) -> (f64, f64) {
         let fv: Vec<&Vec<FeatureVector>> = seeded.iter().map(|&i| &feats[i]).collect();
         let forest = train(&samples(&frames, &fv, variant.skip_specular));
         for i in (0..n).filter(|i| !seeded.contains(i)) {
-            cross.push(dice(&forest, set[i], &feats[i], false));
+            cross.push(dice(&forest, set[i], &feats[i], false, variant.smooth_px));
         }
     }
     let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
@@ -290,9 +316,10 @@ fn export(frames: &[Frame], dir: &Path) {
     std::fs::write(
         dir.join("frames.json"),
         format!(
-            "{{\"frames\": [{}], \"features\": {}}}",
+            "{{\"frames\": [{}], \"features\": {}, \"smooth_px\": {}}}",
             list.join(", "),
-            endofuse::appearance::FEATURE_COUNT
+            endofuse::appearance::FEATURE_COUNT,
+            PROBABILITY_SMOOTHING_SIGMA_PX
         ),
     )
     .unwrap();
@@ -326,7 +353,8 @@ fn time_features() {
 }
 
 /// One widened phantom (`synth --vary-look`): strokes on frames 0–2 (the phantom's own),
-/// per-class Dice on frames 3, 5, 7, 9 of both views; with `sklearn`, the same samples and test
+/// per-class Dice on frames 3, 5, 7, 9 of both views, of the per-pixel maps then of the
+/// smoothed ones; with `sklearn`, the same samples and test
 /// features exported under `dir` for scikit-learn.
 fn widened_phantom(seed: u64, width: u32, height: u32, dir: Option<&Path>) -> Vec<f64> {
     use endofuse::appearance::{Appearance, ClassMap, collect_samples};
@@ -342,21 +370,26 @@ fn widened_phantom(seed: u64, width: u32, height: u32, dir: Option<&Path>) -> Ve
     .expect("a phantom");
     let classes = ClassMap::from_scene(&scene);
     let model = Appearance::train(&scene, &forest_params(), None).expect("seeds");
-    let (mut inter, mut sizes) = (vec![0usize; classes.len()], vec![0usize; classes.len()]);
+    // Per-class Dice counts of the per-pixel maps [0] and the smoothed ones [1].
+    let mut inter = [vec![0usize; classes.len()], vec![0usize; classes.len()]];
+    let mut sizes = inter.clone();
     let mut test_x: Vec<u8> = Vec::new();
     let mut test_y: Vec<u8> = Vec::new();
     for t in [3usize, 5, 7, 9] {
         for c in 0..scene.cameras.len() {
             let frame = scene.frame(c, t).unwrap();
-            let maps = model.classify_frame(&frame);
+            let raw = model.classify_frame_per_pixel(&frame);
+            let smooth = raw.smoothed(PROBABILITY_SMOOTHING_SIGMA_PX);
             let gt = scene.ground_truth_labels(c, t).unwrap().unwrap();
             let k = classes.len();
-            for (i, &l) in gt.data.iter().enumerate() {
-                let truth = classes.class_of_label(l).unwrap_or(0);
-                let said = argmax(&maps.data[i * k..(i + 1) * k]);
-                sizes[truth] += 1;
-                sizes[said] += 1;
-                inter[truth] += (said == truth) as usize * 2;
+            for (m, maps) in [raw, smooth].iter().enumerate() {
+                for (i, &l) in gt.data.iter().enumerate() {
+                    let truth = classes.class_of_label(l).unwrap_or(0);
+                    let said = argmax(&maps.data[i * k..(i + 1) * k]);
+                    sizes[m][truth] += 1;
+                    sizes[m][said] += 1;
+                    inter[m][truth] += (said == truth) as usize * 2;
+                }
             }
             if dir.is_some() {
                 test_x.extend(FrameFeatures::new(&frame).all().into_iter().flatten());
@@ -384,15 +417,18 @@ fn widened_phantom(seed: u64, width: u32, height: u32, dir: Option<&Path>) -> Ve
         std::fs::write(
             d.join("meta.json"),
             format!(
-                "{{\"features\": {}, \"classes\": {}}}",
+                "{{\"features\": {}, \"classes\": {}, \"width\": {width}, \"height\": {height}, \"smooth_px\": {}}}",
                 endofuse::appearance::FEATURE_COUNT,
-                classes.len()
+                classes.len(),
+                PROBABILITY_SMOOTHING_SIGMA_PX
             ),
         )
         .unwrap();
     }
-    (0..classes.len())
-        .map(|k| inter[k] as f64 / sizes[k].max(1) as f64)
+    [0, 1]
+        .iter()
+        .flat_map(|&m| (0..classes.len()).map(move |k| (m, k)))
+        .map(|(m, k)| inter[m][k] as f64 / sizes[m][k].max(1) as f64)
         .collect()
 }
 
@@ -411,15 +447,23 @@ fn phantoms(sklearn: Option<&Path>) {
         "Widened phantoms (synth --vary-look, noise 0.03, tools, smoke; strokes on frames 0-2, Dice on 3, 5, 7, 9, both views)"
     );
     println!();
-    println!("| set | seed, size | kidney | tumour |");
-    println!("|---|---|---|---|");
+    println!("| set | seed, size | kidney | tumour | kidney, per pixel | tumour, per pixel |");
+    println!("|---|---|---|---|---|---|");
     for (set, list) in [
         ("tuning", &TUNING_PHANTOMS[..]),
         ("test", &TEST_PHANTOMS[..]),
     ] {
         for &(seed, w, h) in list {
             let d = widened_phantom(seed, w, h, sklearn);
-            println!("| {set} | {seed}, {w}×{h} | {:.3} | {:.3} |", d[1], d[2]);
+            // d: per-pixel classes then smoothed classes (background, kidney, tumour each).
+            let k = d.len() / 2;
+            println!(
+                "| {set} | {seed}, {w}×{h} | {:.3} | {:.3} | {:.3} | {:.3} |",
+                d[k + 1],
+                d[k + 2],
+                d[1],
+                d[2]
+            );
         }
     }
 }

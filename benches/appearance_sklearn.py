@@ -23,6 +23,25 @@ except ImportError:
 d = sys.argv[1]
 
 
+def smoothed(prob, h, w, sigma):
+    """endofuse's smoothing of probability maps (prob: pixels × classes of an h×w frame):
+    three clamped box passes of radius r per axis (appearance/smooth.rs)."""
+    r = int(round((np.sqrt(4 * sigma * sigma + 1) - 1) / 2))
+    if r == 0:
+        return prob
+    p = prob.reshape(h, w, -1).astype(np.float64)
+    for axis in (1, 0):
+        for _ in range(3):
+            n = p.shape[axis]
+            pad = [(0, 0)] * 3
+            pad[axis] = (r + 1, r)
+            c = np.cumsum(np.pad(p, pad, mode="edge"), axis=axis)
+            hi = np.take(c, np.arange(2 * r + 1, 2 * r + 1 + n), axis=axis)
+            lo = np.take(c, np.arange(0, n), axis=axis)
+            p = (hi - lo) / (2 * r + 1)
+    return p.reshape(h * w, -1)
+
+
 def phantom_rows():
     """The widened phantoms: the same exported samples (every pyramid level the product
     trains on) and test pixels, per-class Dice of scikit-learn's argmax."""
@@ -30,8 +49,8 @@ def phantom_rows():
     if not names:
         return
     print()
-    print("| scikit-learn RF on the same samples: seed | kidney | tumour |")
-    print("|---|---|---|")
+    print("| scikit-learn RF on the same samples: seed | kidney | tumour | kidney, smoothed as endofuse | tumour, smoothed |")
+    print("|---|---|---|---|---|")
     for n in names:
         p = os.path.join(d, n)
         meta = json.load(open(os.path.join(p, "meta.json")))
@@ -41,9 +60,17 @@ def phantom_rows():
         xte = np.fromfile(os.path.join(p, "test_x.u8"), dtype=np.uint8).reshape(-1, f).astype(np.float32)
         yte = np.fromfile(os.path.join(p, "test_y.u8"), dtype=np.uint8)
         clf = RandomForestClassifier(n_estimators=20, n_jobs=2, random_state=0).fit(xtr, ytr)
-        pred = clf.predict(xte)
-        dice = [2.0 * ((pred == c) & (yte == c)).sum() / max(1, (pred == c).sum() + (yte == c).sum()) for c in range(k)]
-        print(f"| {n[6:]} | {dice[1]:.3f} | {dice[2]:.3f} |", flush=True)
+        prob = clf.predict_proba(xte)
+        pred = prob.argmax(1)
+        h, w = meta["height"], meta["width"]
+        frames_n = len(yte) // (h * w)
+        spred = np.concatenate([smoothed(prob[i * h * w:(i + 1) * h * w], h, w, meta["smooth_px"]).argmax(1) for i in range(frames_n)])
+
+        def dice(pr):
+            return [2.0 * ((pr == c) & (yte == c)).sum() / max(1, (pr == c).sum() + (yte == c).sum()) for c in range(k)]
+
+        a, b = dice(pred), dice(spred)
+        print(f"| {n[6:]} | {a[1]:.3f} | {a[2]:.3f} | {b[1]:.3f} | {b[2]:.3f} |", flush=True)
 
 
 phantom_rows()
@@ -60,7 +87,7 @@ def load(name):
     h, w = kidney.shape
     ours = np.fromfile(os.path.join(d, f"{name}_ours.u8"), dtype=np.uint8).reshape(h * w, F).astype(np.float32)
     bank = multiscale_basic_features(img, channel_axis=-1).reshape(h * w, -1).astype(np.float32)
-    return dict(name=name, kidney=kidney.ravel(), strokes=strokes.ravel(), ours=ours, bank=bank)
+    return dict(name=name, kidney=kidney.ravel(), strokes=strokes.ravel(), ours=ours, bank=bank, h=h, w=w)
 
 
 frames = [load(n) for n in meta["frames"]]
@@ -77,12 +104,17 @@ def fit(xs, ys):
     return clf
 
 
-def evaluate(key, frames_set):
+def kidney(clf, f, key, sigma):
+    """Pixels scikit-learn calls kidney, its probabilities smoothed as endofuse's (σ 0: not)."""
+    return smoothed(clf.predict_proba(f[key]), f["h"], f["w"], sigma).argmax(1) == 1
+
+
+def evaluate(key, frames_set, sigma):
     same = []
     for f in frames_set:
         m = f["strokes"] > 0
         clf = fit([f[key][m]], [f["strokes"][m] - 1])
-        pred = clf.predict(f[key]) == 1
+        pred = kidney(clf, f, key, sigma)
         u = ~m
         same.append(dice(pred[u], f["kidney"][u]))
     n = len(frames_set)
@@ -95,13 +127,14 @@ def evaluate(key, frames_set):
             xs.append(frames_set[i][key][m])
             ys.append(frames_set[i]["strokes"][m] - 1)
         clf = fit(xs, ys)
-        cross += [dice(clf.predict(frames_set[i][key]) == 1, frames_set[i]["kidney"]) for i in range(n) if i not in seeded]
+        cross += [dice(kidney(clf, frames_set[i], key, sigma), frames_set[i]["kidney"]) for i in range(n) if i not in seeded]
     return np.mean(same), np.mean(cross)
 
 
 tuning = [f for f in frames if f["name"].startswith("c16")]
 test = [f for f in frames if not f["name"].startswith("c16")]
 for key, label in [("ours", "scikit-learn RF, endofuse features"), ("bank", "scikit-learn RF, skimage multiscale_basic_features")]:
-    ts, tc = evaluate(key, tuning)
-    es, ec = evaluate(key, test)
-    print(f"| {label} | {ts:.3f} | {tc:.3f} | {es:.3f} | {ec:.3f} |")
+    for sigma, how in [(0.0, ""), (meta.get("smooth_px", 0.0), ", smoothed as endofuse")]:
+        ts, tc = evaluate(key, tuning, sigma)
+        es, ec = evaluate(key, test, sigma)
+        print(f"| {label}{how} | {ts:.3f} | {tc:.3f} | {es:.3f} | {ec:.3f} |", flush=True)

@@ -62,6 +62,10 @@ enum Command {
         /// unless --mode or --frames say otherwise.
         #[arg(long)]
         config: Option<PathBuf>,
+        /// Leave each frame's time (`ms`) out of trajectory.json, so that two runs of the same
+        /// input write the same bytes (timings stay in metrics.json).
+        #[arg(long)]
+        no_timings: bool,
     },
     /// A CT label volume (NIfTI .nii/.nii.gz) → kidney and tumour surface meshes in mm.
     ImportCt {
@@ -283,6 +287,7 @@ fn run(cli: Cli) -> Result<()> {
             mode,
             frames,
             config,
+            no_timings,
         }) => {
             let recorded = match config {
                 Some(path) => read_fit_config(&path)?,
@@ -328,8 +333,21 @@ fn run(cli: Cli) -> Result<()> {
                     "track: camera correction estimates fx (fy follows at the calibrated aspect); {k1}; {pp}"
                 );
             }
-            let m =
-                endofuse::track::run(&scene, &out, mode, range, &config, None, &progress("track"))?;
+            let timings = if no_timings {
+                endofuse::track::Timings::LeftOut
+            } else {
+                endofuse::track::Timings::Recorded
+            };
+            let m = endofuse::track::run_timed(
+                &scene,
+                &out,
+                mode,
+                range,
+                &config,
+                timings,
+                None,
+                &progress("track"),
+            )?;
             if let Some(r) = endofuse::fit::profile::report(m.frames) {
                 eprintln!("track: {r}");
             }

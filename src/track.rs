@@ -115,6 +115,39 @@ pub fn run(
     cancel: Option<&AtomicBool>,
     progress: &dyn Fn(usize, usize),
 ) -> Result<TrackMetrics, Error> {
+    run_timed(
+        scene,
+        out,
+        mode,
+        frames,
+        config,
+        Timings::Recorded,
+        cancel,
+        progress,
+    )
+}
+
+/// Whether trajectory.json records each frame's time (`ms`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Timings {
+    Recorded,
+    /// Left out (`track --no-timings`): the only part of the file that differs between two
+    /// runs of the same input.
+    LeftOut,
+}
+
+/// [`run`], with or without per-frame times in trajectory.json.
+#[allow(clippy::too_many_arguments)]
+pub fn run_timed(
+    scene: &Scene,
+    out: &Path,
+    mode: Mode,
+    frames: (usize, usize),
+    config: &FitConfig,
+    timings: Timings,
+    cancel: Option<&AtomicBool>,
+    progress: &dyn Fn(usize, usize),
+) -> Result<TrackMetrics, Error> {
     let forest = ForestParams::default();
     let appearance = Appearance::train(scene, &forest, cancel)?;
     log::info!(
@@ -134,6 +167,7 @@ pub fn run(
         TrackOptions::new(mode, frames, scene.cameras[0].width).with_config(config.clone());
     let total = frames.1 + 1 - frames.0;
     let mut recorder = Recorder::new(scene, out, mode);
+    recorder.record_timings = timings == Timings::Recorded;
     let mut resolved = options.config.resolved(mode, options.fit_level());
     resolved.frames = Some([frames.0, frames.1]);
     recorder.config = Some(resolved);
@@ -214,6 +248,9 @@ pub struct Recorder<'a> {
     refused_frames: std::collections::BTreeMap<String, usize>,
     /// Also write overlay PNGs (`overlay/{camera}/{frame}.png`), as the app's export does.
     pub overlays: bool,
+    /// Write each frame's `ms` into trajectory.json (off: the file depends on the input
+    /// alone, so two runs compare byte for byte).
+    pub record_timings: bool,
     /// The configuration the frames were fitted with, for metrics.json.
     pub config: Option<ResolvedConfig>,
     /// The forest's settings, for metrics.json.
@@ -228,6 +265,7 @@ impl<'a> Recorder<'a> {
             out,
             mode,
             anchor_name: scene.structures[model_anchor].name.clone(),
+            record_timings: true,
             trajectory: Trajectory::default(),
             per_frame_dice: Vec::new(),
             by_structure: BTreeMap::new(),
@@ -365,7 +403,7 @@ impl<'a> Recorder<'a> {
                 .collect(),
             energy: Some(f.energy),
             iterations: Some(f.iterations),
-            ms: Some(f.ms),
+            ms: self.record_timings.then_some(f.ms),
             confidence: Some(f.confidence),
             lost: Some(f.lost),
             warnings: f

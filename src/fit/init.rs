@@ -55,7 +55,8 @@ fn align_z(d: DVec3) -> DMat3 {
 
 /// Per view: the probability of any structure (1 − P(background)), then of each class.
 fn class_planes(appearance: &Appearance, frame: &image::RgbImage) -> (Plane<f32>, Vec<Plane<f32>>) {
-    let maps = appearance.classify_frame(frame);
+    // Per pixel, as the placement was tuned (smoothed maps are for showing labels).
+    let maps = appearance.classify_frame_per_pixel(frame);
     let planes: Vec<Plane<f32>> = (0..maps.classes).map(|k| maps.class_plane(k)).collect();
     (planes[0].map(|&p| 1.0 - p), planes)
 }

@@ -1,0 +1,13 @@
+//! scene.json with the scene validator: the fuzzed file replaces the fixture's scene.json, so
+//! a valid mutation reaches the meshes, seed PNGs and frames it names, as `info` does.
+#![no_main]
+#[path = "scratch.rs"]
+mod scratch;
+
+libfuzzer_sys::fuzz_target!(|data: &[u8]| {
+    let p = scratch::file("scene.json", data);
+    if let Ok(scene) = endofuse::scene::Scene::load(&p) {
+        let _ = scene.seeded_frames();
+        let _ = scene.pixel_counts();
+    }
+});
