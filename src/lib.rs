@@ -20,6 +20,7 @@ pub mod overlay;
 pub mod plane;
 pub mod pool;
 pub mod render;
+pub mod results_dir;
 pub mod rng;
 pub mod scene;
 pub mod session;

@@ -7,7 +7,7 @@ use endofuse::Error;
 use endofuse::fit::config::RecordedRun;
 use endofuse::fit::{FitConfig, Model};
 use endofuse::synth::SynthOptions;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 #[derive(Parser)]
@@ -255,8 +255,10 @@ fn run(cli: Cli) -> Result<()> {
                 trees: trees.max(1),
                 ..Default::default()
             };
-            let metrics =
-                endofuse::classify::run(&scene, &out, range, &params, None, &progress("classify"))?;
+            let inputs: Vec<&Path> = scene.root.as_deref().into_iter().collect();
+            let metrics = endofuse::results_dir::write_whole(&out, &inputs, |dir| {
+                endofuse::classify::run(&scene, dir, range, &params, None, &progress("classify"))
+            })?;
             eprintln!(
                 "classify: forest of {} trees trained in {:.2} s on {} seeded pixels; {:.1} ms per view",
                 metrics.forest.trees,
@@ -338,16 +340,19 @@ fn run(cli: Cli) -> Result<()> {
             } else {
                 endofuse::track::Timings::Recorded
             };
-            let m = endofuse::track::run_timed(
-                &scene,
-                &out,
-                mode,
-                range,
-                &config,
-                timings,
-                None,
-                &progress("track"),
-            )?;
+            let inputs: Vec<&Path> = scene.root.as_deref().into_iter().collect();
+            let m = endofuse::results_dir::write_whole(&out, &inputs, |dir| {
+                endofuse::track::run_timed(
+                    &scene,
+                    dir,
+                    mode,
+                    range,
+                    &config,
+                    timings,
+                    None,
+                    &progress("track"),
+                )
+            })?;
             if let Some(r) = endofuse::fit::profile::report(m.frames) {
                 eprintln!("track: {r}");
             }

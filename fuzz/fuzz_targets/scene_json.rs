@@ -7,7 +7,8 @@ mod scratch;
 libfuzzer_sys::fuzz_target!(|data: &[u8]| {
     let p = scratch::file("scene.json", data);
     if let Ok(scene) = endofuse::scene::Scene::load(&p) {
-        let _ = scene.seeded_frames();
-        let _ = scene.pixel_counts();
+        let _ = scene.seeds.seeded_frames();
+        let _ = scene.seeds.pixel_counts();
+        let _ = scene.ground_truth_frames();
     }
 });

@@ -1,0 +1,150 @@
+//! A results folder (`track --out`, `classify --out`) written whole or not at all.
+//!
+//! Outputs are written into a hidden staging folder beside `--out` and renamed onto it only
+//! when every frame succeeded: a bad frame half-way, a full disk or a kill leaves `--out` as
+//! it was (a `.NAME.partial-PID` folder may remain; its name says what it is), never a mix of
+//! old and new frames. An existing `--out` is replaced only when it is empty or an earlier
+//! `track`/`classify` result (it holds metrics.json), and never when it holds the scene or
+//! the working folder: anything else in it is the user's, and is refused.
+
+use crate::ctimport::output::{canonical, commit, staging};
+use crate::error::{Error, InputError};
+use std::path::Path;
+
+/// Refuses an `out` that replacing would destroy more than an earlier result of.
+pub fn check(out: &Path, inputs: &[&Path]) -> Result<(), Error> {
+    if out.exists() && !out.is_dir() {
+        return Err(InputError::new(
+            out,
+            "is a file, not a folder: choose a folder for the results",
+        )
+        .into());
+    }
+    let empty = std::fs::read_dir(out).map_or(true, |mut d| d.next().is_none());
+    let target = canonical(out);
+    let here = std::env::current_dir()
+        .and_then(std::fs::canonicalize)
+        .unwrap_or_default();
+    if out.exists() && here.starts_with(&target) {
+        return Err(InputError::new(
+            out,
+            "is the working folder or one above it: results would replace it; choose a new folder",
+        )
+        .into());
+    }
+    for input in inputs {
+        if canonical(input).starts_with(&target) {
+            return Err(InputError::new(
+                out,
+                format!(
+                    "holds an input ({}): results would replace it; choose a new folder",
+                    input.display()
+                ),
+            )
+            .into());
+        }
+    }
+    if !empty && !out.join("metrics.json").is_file() {
+        return Err(InputError::new(
+            out,
+            "holds files that are not an earlier track or classify result (no metrics.json): choose an empty or new folder",
+        )
+        .into());
+    }
+    Ok(())
+}
+
+/// Checks `out`, runs `write` into a staging folder and moves that onto `out` when it
+/// succeeds; on failure the staging folder is removed and `out` is untouched.
+pub fn write_whole<T>(
+    out: &Path,
+    inputs: &[&Path],
+    write: impl FnOnce(&Path) -> Result<T, Error>,
+) -> Result<T, Error> {
+    check(out, inputs)?;
+    let tmp = staging(out)?;
+    match write(&tmp) {
+        Ok(v) => {
+            commit(&tmp, out)?;
+            Ok(v)
+        }
+        Err(e) => {
+            let _ = std::fs::remove_dir_all(&tmp);
+            Err(e)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scratch(tag: &str) -> std::path::PathBuf {
+        let d = std::env::temp_dir().join(format!("endofuse-results-{}-{tag}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        d
+    }
+
+    #[test]
+    fn a_failed_run_leaves_the_earlier_result_and_no_staging_folder() {
+        let out = scratch("earlier");
+        std::fs::create_dir_all(out.join("masks")).unwrap();
+        std::fs::write(out.join("metrics.json"), "{\"old\": true}").unwrap();
+        std::fs::write(out.join("masks/000000.png"), "old").unwrap();
+        let failed: Result<(), Error> = write_whole(&out, &[], |tmp| {
+            std::fs::write(tmp.join("metrics.json"), "{\"new\": true}").unwrap();
+            Err(crate::error::input_err("frame 3", "cannot decode"))
+        });
+        assert!(failed.is_err());
+        assert_eq!(
+            std::fs::read_to_string(out.join("metrics.json")).unwrap(),
+            "{\"old\": true}"
+        );
+        assert!(out.join("masks/000000.png").is_file());
+        let leftovers: Vec<_> = std::fs::read_dir(out.parent().unwrap())
+            .unwrap()
+            .flatten()
+            .filter(|e| e.file_name().to_string_lossy().contains(".partial-"))
+            .filter(|e| e.file_name().to_string_lossy().contains("earlier"))
+            .collect();
+        assert!(leftovers.is_empty(), "staging folder left behind");
+        // A run that succeeds replaces the whole folder: no old frame stays beside the new.
+        write_whole(&out, &[], |tmp| {
+            std::fs::write(tmp.join("metrics.json"), "{\"new\": true}").map_err(|source| {
+                Error::Write {
+                    path: tmp.to_path_buf(),
+                    source,
+                }
+            })
+        })
+        .unwrap();
+        assert_eq!(
+            std::fs::read_to_string(out.join("metrics.json")).unwrap(),
+            "{\"new\": true}"
+        );
+        assert!(
+            !out.join("masks").exists(),
+            "old frames mixed with new ones"
+        );
+        let _ = std::fs::remove_dir_all(&out);
+    }
+
+    #[test]
+    fn a_folder_of_other_files_or_holding_the_scene_is_refused() {
+        let out = scratch("user-files");
+        std::fs::create_dir_all(&out).unwrap();
+        std::fs::write(out.join("notes.txt"), "mine").unwrap();
+        let e = check(&out, &[]).unwrap_err().to_string();
+        assert!(e.contains("no metrics.json"), "{e}");
+        std::fs::remove_file(out.join("notes.txt")).unwrap();
+        check(&out, &[]).expect("an empty folder is fine");
+        std::fs::create_dir_all(out.join("scene")).unwrap();
+        std::fs::write(out.join("metrics.json"), "{}").unwrap();
+        let e = check(&out, &[&out.join("scene")]).unwrap_err().to_string();
+        assert!(e.contains("holds an input"), "{e}");
+        let file = out.join("metrics.json");
+        let e = check(&file, &[]).unwrap_err().to_string();
+        assert!(e.contains("is a file"), "{e}");
+        let _ = std::fs::remove_dir_all(&out);
+    }
+}
