@@ -278,7 +278,12 @@ mod tests {
             results: Vec::new(),
         };
         s.save(&path).unwrap();
-        assert!(!path.with_extension("json.tmp").exists());
+        let leftovers: Vec<_> = std::fs::read_dir(&dir)
+            .unwrap()
+            .flatten()
+            .filter(|e| e.file_name().to_string_lossy().contains(".tmp"))
+            .collect();
+        assert!(leftovers.is_empty(), "temporary left behind: {leftovers:?}");
         assert_eq!(Session::load(&path).unwrap(), s);
         std::fs::write(
             &path,

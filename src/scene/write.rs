@@ -15,9 +15,24 @@ pub fn write_json_atomic<T: Serialize>(path: &Path, value: &T) -> Result<(), Err
         std::fs::create_dir_all(parent).map_err(wrap)?;
     }
     let text = serde_json::to_string_pretty(value).map_err(|e| wrap(std::io::Error::other(e)))?;
-    let tmp = path.with_extension("json.tmp");
-    std::fs::write(&tmp, text + "\n").map_err(wrap)?;
-    std::fs::rename(&tmp, path).map_err(wrap)
+    // A name of its own per write: two writers of one file (an autosave still running when
+    // the next starts) never share a half-written temporary.
+    static WRITES: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let n = WRITES.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let tmp = path.with_extension(format!("json.tmp-{}-{n}", std::process::id()));
+    let written = (|| {
+        use std::io::Write;
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(text.as_bytes())?;
+        f.write_all(b"\n")?;
+        // On disk before it takes the name: a crash after the rename finds the whole file.
+        f.sync_all()?;
+        std::fs::rename(&tmp, path)
+    })();
+    if written.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    written.map_err(wrap)
 }
 
 /// Writes an RGB frame (PNG or JPEG by extension), creating parent folders.
