@@ -70,7 +70,16 @@ pub fn write_whole<T>(
         }
         Err(e) => {
             let _ = std::fs::remove_dir_all(&tmp);
-            Err(e)
+            // Name the file as the user knows it: under --out, not the staging folder (gone).
+            Err(match e {
+                Error::Write { path, source } => Error::Write {
+                    path: path
+                        .strip_prefix(&tmp)
+                        .map_or_else(|_| path.clone(), |rel| out.join(rel)),
+                    source,
+                },
+                other => other,
+            })
         }
     }
 }

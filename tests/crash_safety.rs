@@ -141,3 +141,50 @@ fn a_session_killed_while_saving_is_whole_and_never_older_than_the_last_save() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A disk that takes no more bytes (simulated by a file-size limit of 0 with SIGXFSZ ignored,
+/// so every write fails as on a full disk): `classify` and `track` exit 1 with one line naming
+/// the file they could not write, and leave neither `--out` nor a staging folder behind.
+#[test]
+fn a_full_disk_gives_exit_1_naming_the_file_and_leaves_nothing_half_written() {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("full-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/handmade_scene");
+    for command in ["classify", "track"] {
+        let out = dir.join(command);
+        let run = Command::new("sh")
+            .arg("-c")
+            .arg("ulimit -f 0 && trap '' XFSZ && exec \"$0\" \"$@\"")
+            .arg(env!("CARGO_BIN_EXE_endofuse"))
+            .arg(command)
+            .arg(&scene)
+            .arg("--out")
+            .arg(&out)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&run.stderr);
+        assert_eq!(run.status.code(), Some(1), "{command}: {stderr}");
+        let last = stderr
+            .lines()
+            .filter(|l| l.starts_with("endofuse:"))
+            .collect::<Vec<_>>();
+        assert_eq!(last.len(), 1, "{command}: one error line: {stderr}");
+        // The first file either writes is a PNG (a map or a mask), named under --out.
+        assert!(
+            last[0].contains("cannot write")
+                && last[0].contains(&*out.to_string_lossy())
+                && last[0].contains(".png")
+                && !last[0].contains(".partial-"),
+            "{command}: names the file it could not write: {stderr}"
+        );
+        assert!(!stderr.contains("panicked"), "{stderr}");
+        let left: Vec<_> = std::fs::read_dir(&dir)
+            .unwrap()
+            .flatten()
+            .map(|e| e.file_name())
+            .collect();
+        assert!(left.is_empty(), "{command} left {left:?}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -70,7 +70,7 @@ fn draw_png(
     }
     let img =
         image::RgbImage::from_raw(W, H, buf).ok_or_else(|| plot_error(path, "buffer size"))?;
-    img.save(path).map_err(|e| plot_error(path, e))
+    crate::scene::write::save_image(path, &img).map_err(|e| plot_error(path, e))
 }
 
 fn s<E: std::fmt::Display>(e: E) -> String {

@@ -67,7 +67,7 @@ pub fn write_label_png(path: &Path, labels: &LabelImage) -> std::io::Result<()> 
         labels.data.clone(),
     )
     .ok_or_else(|| std::io::Error::other("label buffer size does not match its dimensions"))?;
-    img.save(path).map_err(std::io::Error::other)
+    super::write::save_image(path, &img)
 }
 
 #[cfg(test)]
@@ -95,6 +95,24 @@ mod tests {
         std::fs::write(&junk, b"\x89PNG\r\n\x1a\nnot really").unwrap();
         assert!(read_label_png(&junk).is_err());
         assert!(read_label_png(&dir.join("missing.png")).is_err());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// A full disk is an error, not an empty file reported as written (`image`'s `save`
+    /// dropped the failed flush of its buffered writer).
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn a_png_written_to_a_full_disk_is_an_error() {
+        let dir = std::env::temp_dir().join(format!("endofuse-full-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let full = dir.join("full.png");
+        let _ = std::fs::remove_file(&full);
+        std::os::unix::fs::symlink("/dev/full", &full).unwrap();
+        let img = Plane::from_vec(3, 2, vec![0, 1, 2, 255, 3, 0]).unwrap();
+        let err = write_label_png(&full, &img).unwrap_err();
+        assert_eq!(err.raw_os_error(), Some(28), "ENOSPC, not {err}");
+        let rgb = image::RgbImage::from_pixel(4, 4, image::Rgb([9, 9, 9]));
+        assert!(crate::scene::write::write_rgb(&full, &rgb).is_err());
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

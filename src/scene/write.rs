@@ -44,7 +44,23 @@ pub fn write_rgb(path: &Path, img: &image::RgbImage) -> Result<(), Error> {
     if let Some(parent) = path.parent() {
         std::fs::create_dir_all(parent).map_err(wrap)?;
     }
-    img.save(path).map_err(|e| wrap(std::io::Error::other(e)))
+    save_image(path, img).map_err(wrap)
+}
+
+/// Encodes an image in memory (PNG or JPEG by extension) and writes the bytes unbuffered, so
+/// that every write error reaches the caller: `image`'s own `save` drops a buffered writer
+/// whose final flush failed (a full disk) and reports success, leaving an empty file.
+pub fn save_image<P, C>(path: &Path, img: &image::ImageBuffer<P, C>) -> std::io::Result<()>
+where
+    P: image::PixelWithColorType,
+    [P::Subpixel]: image::EncodableLayout,
+    C: std::ops::Deref<Target = [P::Subpixel]>,
+{
+    let format = image::ImageFormat::from_path(path).map_err(std::io::Error::other)?;
+    let mut bytes = Vec::new();
+    img.write_to(&mut std::io::Cursor::new(&mut bytes), format)
+        .map_err(std::io::Error::other)?;
+    std::fs::write(path, bytes)
 }
 
 /// Writes a label PNG, mapping the I/O error to [`Error::Write`].
