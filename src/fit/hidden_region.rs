@@ -416,15 +416,7 @@ pub fn region_mask(mask: &Mask, camera: &Camera, region: &HiddenRegion) -> Mask 
     }
     // Distortion stretches the edge of a wide lens by a few per cent: 5 % on top.
     let radius_px = 1.05 * f * region.radius_mm / near;
-    let d2 = crate::render::squared_edt(mask);
-    Mask {
-        data: d2
-            .data
-            .iter()
-            .map(|&d| (d as f64) <= radius_px * radius_px)
-            .collect(),
-        ..mask.clone()
-    }
+    crate::render::distance::dilate(mask, radius_px)
 }
 
 #[cfg(test)]

@@ -149,7 +149,8 @@ fn mask_occluders(
     if view.level_count() <= level {
         return;
     }
-    let inside = crate::render::squared_edt(&labels.map(|&l| l == 0));
+    // Depth of each labelled pixel inside the labels (only the labels' box is transformed).
+    let inside = crate::render::distance::squared_depth_inside(&labels.map(|&l| l != 0));
     let (lw, lh) = view.size(level);
     let scale = 1usize << level;
     let coarse = |i: usize| -> u32 {

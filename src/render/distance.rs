@@ -40,6 +40,76 @@ pub fn squared_edt(features: &Mask) -> DistanceMap {
     }
 }
 
+/// Inclusive bounds `[x0, y0, x1, y1]` of the `true` pixels of `mask`, widened by `margin`
+/// px and clamped to the image; None when no pixel is `true`.
+pub fn true_bounds(mask: &Mask, margin: usize) -> Option<[usize; 4]> {
+    let (w, h) = (mask.width, mask.height);
+    let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
+    for (y, row) in mask.data.chunks_exact(w.max(1)).enumerate() {
+        if let (Some(a), Some(b)) = (row.iter().position(|&v| v), row.iter().rposition(|&v| v)) {
+            (x0, x1) = (x0.min(a), x1.max(b));
+            (y0, y1) = (y0.min(y), y1.max(y));
+        }
+    }
+    (x0 != usize::MAX).then(|| {
+        [
+            x0.saturating_sub(margin),
+            y0.saturating_sub(margin),
+            (x1 + margin).min(w - 1),
+            (y1 + margin).min(h - 1),
+        ]
+    })
+}
+
+/// [`squared_edt`] over the box `[x0, y0, x1, y1]` of `features` only (pixels outside it get
+/// `outside`): what a frame's masks need when everything of interest lies in a small part of
+/// a 1080p frame (a transform of the whole frame is ~40 ms, single-threaded).
+pub fn squared_edt_in(features: &Mask, bounds: [usize; 4], outside: f32) -> DistanceMap {
+    let [x0, y0, x1, y1] = bounds;
+    let (cw, ch) = (x1 + 1 - x0, y1 + 1 - y0);
+    let crop = Plane {
+        width: cw,
+        height: ch,
+        data: (y0..=y1)
+            .flat_map(|y| {
+                features.data[y * features.width + x0..=y * features.width + x1]
+                    .iter()
+                    .copied()
+            })
+            .collect(),
+    };
+    let d = squared_edt(&crop);
+    let mut out = Plane::filled(features.width, features.height, outside);
+    for (cy, row) in d.data.chunks_exact(cw).enumerate() {
+        let start = (y0 + cy) * features.width + x0;
+        out.data[start..start + cw].copy_from_slice(row);
+    }
+    out
+}
+
+/// Pixels within `radius_px` of a `true` pixel of `mask` (a disc dilation), exactly as a
+/// threshold of [`squared_edt`] of the whole mask gives them: a pixel farther than the radius
+/// from the mask's bounding box is farther from every mask pixel, so the transform runs on that
+/// box widened by the radius only.
+pub fn dilate(mask: &Mask, radius_px: f64) -> Mask {
+    let r2 = radius_px * radius_px;
+    let Some(bounds) = true_bounds(mask, radius_px.max(0.0).ceil() as usize + 1) else {
+        return mask.clone();
+    };
+    squared_edt_in(mask, bounds, f32::INFINITY).map(|&d| (d as f64) <= r2)
+}
+
+/// Squared distance (px²) from each `true` pixel of `region` to the nearest `false` pixel
+/// (0 on `false` pixels; ∞ when every pixel is `true`), equal to [`squared_edt`] of the
+/// complement: the region's bounding box widened by 1 px is ringed by `false` pixels (or the
+/// image's edge, beyond which there are none), so no `false` pixel outside it is nearer.
+pub fn squared_depth_inside(region: &Mask) -> DistanceMap {
+    let Some(bounds) = true_bounds(region, 1) else {
+        return Plane::filled(region.width, region.height, 0.0);
+    };
+    squared_edt_in(&region.map(|&v| !v), bounds, 0.0)
+}
+
 /// Squared distance (px²) to the nearest `true` pixel and that pixel's index (y·w + x), for
 /// every pixel; index `u32::MAX` and distance ∞ when there is none. Same two passes as
 /// [`squared_edt`], carrying the argmin: the fit uses it to find, for a band pixel, the contour
@@ -208,6 +278,41 @@ mod tests {
                     .fold(f32::INFINITY, f32::min)
             })
             .collect()
+    }
+
+    #[test]
+    fn cropped_transforms_equal_the_whole_frame_ones() {
+        let mut rng = Rng::new(52);
+        for trial in 0..80 {
+            let (w, h) = (1 + rng.below(50), 1 + rng.below(40));
+            // A blob somewhere (touching the edges sometimes) plus specks.
+            let (cx, cy, r) = (
+                rng.range(-5.0, w as f64 + 5.0),
+                rng.range(-5.0, h as f64 + 5.0),
+                rng.range(0.0, 12.0),
+            );
+            let density = [0.0, 0.0, 0.002, 0.02][trial % 4];
+            let mask = Plane::from_vec(
+                w,
+                h,
+                (0..w * h)
+                    .map(|i| {
+                        let (x, y) = ((i % w) as f64, (i / w) as f64);
+                        (x - cx).hypot(y - cy) < r || rng.uniform() < density
+                    })
+                    .collect(),
+            )
+            .unwrap();
+            let radius = rng.range(0.0, 9.0);
+            let whole = squared_edt(&mask).map(|&d| (d as f64) <= radius * radius);
+            assert_eq!(dilate(&mask, radius), whole, "dilate {w}x{h} r {radius}");
+            let inside_whole = squared_edt(&mask.map(|&v| !v));
+            let inside = squared_depth_inside(&mask);
+            for (i, &m) in mask.data.iter().enumerate() {
+                let want = if m { inside_whole.data[i] } else { 0.0 };
+                assert_eq!(inside.data[i], want, "depth {w}x{h} pixel {i}");
+            }
+        }
     }
 
     #[test]
