@@ -25,6 +25,10 @@ for t in "${targets[@]}"; do mkdir -p "$seeds/$t" "corpus/$t"; done
 prefixed() { # BYTE FILE OUT: the file behind one selector byte
   { printf "\\x$(printf %02x "$1")"; cat "$2"; } > "$3"
 }
+# Inputs that once crashed or hung a target stay in its seeds (tests/fuzz_regressions.rs).
+for t in "${targets[@]}"; do
+  for f in "$fx"/fuzz_regressions/"$t"-*; do [ -f "$f" ] && cp "$f" "$seeds/$t/"; done
+done
 cp "$fx/handmade_scene/scene.json" "$seeds/scene_json/" 2>/dev/null || true
 cp "$fx/handmade_scene/meshes/kidney.obj" "$seeds/mesh_obj/" 2>/dev/null || true
 cp "$fx/handmade_scene/meshes/tumour.stl" "$seeds/mesh_stl/" 2>/dev/null || true

@@ -208,6 +208,14 @@ pub fn parse_ply(bytes: &[u8]) -> Result<Mesh, PlyError> {
     };
     let mut mesh = Mesh::default();
     for el in &elements {
+        // An element without properties holds no data, whatever count its header claims
+        // (walking a claimed 10¹¹ of them was a hang the fuzzer found).
+        if el.properties.is_empty() {
+            if el.name == "vertex" && el.count > 0 {
+                return Err(PlyError::NoCoordinates);
+            }
+            continue;
+        }
         for _ in 0..el.count {
             let mut xyz = [f64::NAN; 3];
             for prop in &el.properties {
