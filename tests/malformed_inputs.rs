@@ -321,7 +321,7 @@ fn binary_stl(claimed: u32, written: usize) -> Vec<u8> {
     for t in 0..written {
         let t = t as f32;
         for v in [0.0, 0.0, 0.0, t, 0.0, 0.0, t + 1.0, 1.0, 0.0, t, 1.0, 1.0] {
-            b.extend((v as f32).to_le_bytes());
+            b.extend(v.to_le_bytes());
         }
         b.extend([0u8; 2]);
     }
