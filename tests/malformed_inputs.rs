@@ -260,6 +260,18 @@ fn track(scene: &Path) -> Run {
     ])
 }
 
+/// `new-scene --out root/out` with the fixture's calibration (its scene.json) and meshes, and
+/// the given views.
+fn fixture_anatomy(root: &Path, views: Vec<OsString>) -> Run {
+    let f = fixture();
+    new_scene_with(
+        root,
+        &f.join("scene.json"),
+        ["--meshes".into(), f.join("meshes").into()],
+        views,
+    )
+}
+
 /// `new-scene` with the fixture's frames as the two views and its meshes as the anatomy.
 fn new_scene(root: &Path, calib: &Path) -> Run {
     let f = fixture();
@@ -880,25 +892,13 @@ fn malformed_frames() {
             |r| {
                 save_rgb(&r.join("views/left/000000.png"), 64, 48);
                 save_rgb(&r.join("views/left/000002.png"), 64, 48);
-                let f = fixture();
-                new_scene_with(
-                    r,
-                    &f.join("scene.json"),
-                    ["--meshes".into(), f.join("meshes").into()],
-                    views(&r.join("views/left"), &f.join("right")),
-                )
+                fixture_anatomy(r, views(&r.join("views/left"), &fixture().join("right")))
             },
         ),
         case("views-of-two-sizes", "views/right", &["128×96"], |r| {
             save_rgb(&r.join("views/right/000000.png"), 128, 96);
             save_rgb(&r.join("views/right/000001.png"), 128, 96);
-            let f = fixture();
-            new_scene_with(
-                r,
-                &f.join("scene.json"),
-                ["--meshes".into(), f.join("meshes").into()],
-                views(&f.join("left"), &r.join("views/right")),
-            )
+            fixture_anatomy(r, views(&fixture().join("left"), &r.join("views/right")))
         }),
         case(
             "view-first-frame-text",
@@ -907,13 +907,7 @@ fn malformed_frames() {
             |r| {
                 write(&r.join("views/left/000000.png"), "not a PNG");
                 save_rgb(&r.join("views/left/000001.png"), 64, 48);
-                let f = fixture();
-                new_scene_with(
-                    r,
-                    &f.join("scene.json"),
-                    ["--meshes".into(), f.join("meshes").into()],
-                    views(&r.join("views/left"), &f.join("right")),
-                )
+                fixture_anatomy(r, views(&r.join("views/left"), &fixture().join("right")))
             },
         ),
         case(
@@ -922,13 +916,7 @@ fn malformed_frames() {
             &["no numbered PNG or JPEG frames"],
             |r| {
                 write(&r.join("views/left/notes.txt"), "nothing here");
-                let f = fixture();
-                new_scene_with(
-                    r,
-                    &f.join("scene.json"),
-                    ["--meshes".into(), f.join("meshes").into()],
-                    views(&r.join("views/left"), &f.join("right")),
-                )
+                fixture_anatomy(r, views(&r.join("views/left"), &fixture().join("right")))
             },
         ),
         case(
@@ -937,12 +925,9 @@ fn malformed_frames() {
             &["is neither a video"],
             |r| {
                 write(&r.join("views/left.txt"), "frames elsewhere");
-                let f = fixture();
-                new_scene_with(
+                fixture_anatomy(
                     r,
-                    &f.join("scene.json"),
-                    ["--meshes".into(), f.join("meshes").into()],
-                    views(&r.join("views/left.txt"), &f.join("right")),
+                    views(&r.join("views/left.txt"), &fixture().join("right")),
                 )
             },
         ),
@@ -1443,13 +1428,7 @@ fn malformed_videos() {
         }),
         case("new-scene-view-not-a-video", "fake.mp4", NOT_A_VIDEO, |r| {
             write(&r.join("fake.mp4"), "this is not a video\n");
-            let f = fixture();
-            new_scene_with(
-                r,
-                &f.join("scene.json"),
-                ["--meshes".into(), f.join("meshes").into()],
-                views(&r.join("fake.mp4"), &f.join("right")),
-            )
+            fixture_anatomy(r, views(&r.join("fake.mp4"), &fixture().join("right")))
         }),
         case(
             "new-scene-empty-side-by-side",
