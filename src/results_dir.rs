@@ -7,7 +7,7 @@
 //! `track`/`classify` result (it holds metrics.json), and never when it holds the scene or
 //! the working folder: anything else in it is the user's, and is refused.
 
-use crate::ctimport::output::{canonical, commit, staging};
+use crate::ctimport::output::{commit, refuse_destroying, staging};
 use crate::error::{Error, InputError};
 use std::path::Path;
 
@@ -20,30 +20,11 @@ pub fn check(out: &Path, inputs: &[&Path]) -> Result<(), Error> {
         )
         .into());
     }
+    // Checked even for an empty folder: the commit renames `out` itself aside.
+    if out.exists() {
+        refuse_destroying(out, inputs, "results would replace it; choose a new folder")?;
+    }
     let empty = std::fs::read_dir(out).map_or(true, |mut d| d.next().is_none());
-    let target = canonical(out);
-    let here = std::env::current_dir()
-        .and_then(std::fs::canonicalize)
-        .unwrap_or_default();
-    if out.exists() && here.starts_with(&target) {
-        return Err(InputError::new(
-            out,
-            "is the working folder or one above it: results would replace it; choose a new folder",
-        )
-        .into());
-    }
-    for input in inputs {
-        if canonical(input).starts_with(&target) {
-            return Err(InputError::new(
-                out,
-                format!(
-                    "holds an input ({}): results would replace it; choose a new folder",
-                    input.display()
-                ),
-            )
-            .into());
-        }
-    }
     if !empty && !out.join("metrics.json").is_file() {
         return Err(InputError::new(
             out,

@@ -34,30 +34,8 @@ pub fn check_target(out: &Path, force: bool, inputs: &[&Path]) -> Result<(), Err
         )
         .into());
     }
+    refuse_destroying(out, inputs, "--force will not replace it")?;
     let target = canonical(out);
-    let here = std::env::current_dir()
-        .and_then(std::fs::canonicalize)
-        .unwrap_or_default();
-    if here.starts_with(&target) {
-        return Err(InputError::new(
-            out,
-            "is the working folder or one above it: --force will not replace it",
-        )
-        .into());
-    }
-    for input in inputs {
-        let input = canonical(input);
-        if input.starts_with(&target) {
-            return Err(InputError::new(
-                out,
-                format!(
-                    "holds an input ({}): --force will not replace it",
-                    input.display()
-                ),
-            )
-            .into());
-        }
-    }
     let earlier_output = ["ct.json", "structures.json", "scene.json"]
         .iter()
         .any(|f| target.join(f).is_file());
@@ -67,6 +45,34 @@ pub fn check_target(out: &Path, force: bool, inputs: &[&Path]) -> Result<(), Err
             "is not an earlier endofuse output (no ct.json or scene.json): --force replaces only those",
         )
         .into());
+    }
+    Ok(())
+}
+
+/// Refuses replacing `out` when that would destroy more than an output: when it is the
+/// working folder or one above it, or holds one of the `inputs`. `consequence` ends the
+/// message (what the command will not do).
+pub fn refuse_destroying(out: &Path, inputs: &[&Path], consequence: &str) -> Result<(), Error> {
+    let target = canonical(out);
+    let here = std::env::current_dir()
+        .and_then(std::fs::canonicalize)
+        .unwrap_or_default();
+    if here.starts_with(&target) {
+        return Err(InputError::new(
+            out,
+            format!("is the working folder or one above it: {consequence}"),
+        )
+        .into());
+    }
+    for input in inputs {
+        let input = canonical(input);
+        if input.starts_with(&target) {
+            return Err(InputError::new(
+                out,
+                format!("holds an input ({}): {consequence}", input.display()),
+            )
+            .into());
+        }
     }
     Ok(())
 }
