@@ -17,14 +17,15 @@ pub fn box_radius_for_sigma(sigma_px: f32) -> usize {
     ((w - 1.0) / 2.0).round().max(0.0) as usize
 }
 
-/// One pass of a running-sum box of radius `r` along a line of `n` samples spaced `stride`
-/// apart (edges clamped), from `src` into `dst`.
-fn box_line(src: &[f32], dst: &mut [f32], n: usize, stride: usize, r: usize) {
-    let at = |i: isize| src[(i.clamp(0, n as isize - 1) as usize) * stride];
+/// One pass of a running-sum box of radius `r` along a contiguous line (edges clamped), from
+/// `src` into `dst` (same length).
+fn box_line(src: &[f32], dst: &mut [f32], r: usize) {
+    let n = src.len();
+    let at = |i: isize| src[i.clamp(0, n as isize - 1) as usize];
     let norm = 1.0 / (2 * r + 1) as f32;
     let mut sum: f32 = (-(r as isize)..=r as isize).map(at).sum();
-    for i in 0..n {
-        dst[i * stride] = sum * norm;
+    for (i, d) in dst.iter_mut().enumerate() {
+        *d = sum * norm;
         sum += at(i as isize + r as isize + 1) - at(i as isize - r as isize);
     }
 }
@@ -36,7 +37,7 @@ fn smooth_plane(plane: &mut [f32], width: usize, height: usize, r: usize) {
         plane
             .par_chunks(width)
             .zip(tmp.par_chunks_mut(width))
-            .for_each(|(src, dst)| box_line(src, dst, width, 1, r));
+            .for_each(|(src, dst)| box_line(src, dst, r));
         plane.copy_from_slice(&tmp);
     }
     // Columns: transpose through a buffer so each column is contiguous (cache-friendly).
@@ -50,7 +51,7 @@ fn smooth_plane(plane: &mut [f32], width: usize, height: usize, r: usize) {
     for _ in 0..3 {
         cols.par_chunks(height)
             .zip(out.par_chunks_mut(height))
-            .for_each(|(src, dst)| box_line(src, dst, height, 1, r));
+            .for_each(|(src, dst)| box_line(src, dst, r));
         cols.copy_from_slice(&out);
     }
     for (x, col) in cols.chunks(height).enumerate() {
