@@ -3,21 +3,13 @@
 
 mod common;
 
-use common::fixture;
+use common::{edit_json, fixture};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
 /// A fresh copy of the fixture in a temp folder unique to `name`.
 fn scratch(name: &str) -> PathBuf {
     common::fixture_copy(&format!("bad-{name}"))
-}
-
-fn edit_json(dir: &Path, f: impl FnOnce(&mut serde_json::Value)) {
-    let p = dir.join("scene.json");
-    let mut v: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&p).unwrap()).unwrap();
-    f(&mut v);
-    std::fs::write(p, serde_json::to_string_pretty(&v).unwrap()).unwrap();
 }
 
 fn info(scene: &Path) -> (i32, String) {

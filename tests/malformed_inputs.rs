@@ -11,7 +11,7 @@
 
 mod common;
 
-use common::fixture;
+use common::{edit_json, fixture};
 use std::ffi::OsString;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -205,14 +205,6 @@ fn scene(root: &Path, edit: impl FnOnce(&Path)) -> PathBuf {
     common::copy_dir(&fixture(), &dir);
     edit(&dir);
     dir
-}
-
-fn edit_json(scene: &Path, f: impl FnOnce(&mut serde_json::Value)) {
-    let p = scene.join("scene.json");
-    let mut v: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&p).unwrap()).unwrap();
-    f(&mut v);
-    std::fs::write(p, serde_json::to_string_pretty(&v).unwrap()).unwrap();
 }
 
 fn edit_bytes(path: &Path, f: impl FnOnce(Vec<u8>) -> Vec<u8>) {

@@ -63,6 +63,14 @@ pub fn synth(tag: &str, args: &[&str]) -> PathBuf {
     dir
 }
 
+/// Rewrites `dir/scene.json` after `f` changed its JSON.
+pub fn edit_json(dir: &Path, f: impl FnOnce(&mut serde_json::Value)) {
+    let p = dir.join("scene.json");
+    let mut v = read_json(&p);
+    f(&mut v);
+    std::fs::write(p, serde_json::to_string_pretty(&v).unwrap()).unwrap();
+}
+
 pub fn read_json(p: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
 }
