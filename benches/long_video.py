@@ -1,15 +1,17 @@
 #!/usr/bin/env python3
-"""Long videos (issue 17): a 10,000-frame 1080p stereo scene read from video files, tracked
-as a user would, with its peak memory and time measured at two lengths to show both stay
+"""Long videos (issue 17): a 10,000-frame 1080p stereo scene read from video files (or, with
+`--source images`, from an image sequence), tracked as a user would, with its peak memory and time measured at two lengths to show both stay
 bounded and linear.
 
-    cargo build --release && python3 benches/long_video.py [--frames 10000] [--short 1000]
+    cargo build --release && python3 benches/long_video.py [--frames 10000] [--short 1000] [--source video|images]
 
 Needs FFmpeg (ffmpeg, ffprobe) on PATH and GNU time (/usr/bin/time). The scene: `synth` writes
 100 frames of 1920x1080 (tools, noise 0.02, no zoom); each view's video plays them forward
 and back again (0..99, 98..1, ...) so the motion stays continuous for as long as asked, encoded
 as H.264 (libx264, ultrafast, crf 18; one 198-frame cycle encoded, then repeated by stream
-copy). The scene.json points each camera at its video; the
+copy). With `--source images` each view is a folder of 10,000 PNG files named 000000.png ...,
+hard links to the same 198-frame cycle (each file is opened and decoded like any other; the
+links only spare the disk 60 GB). The scene.json points each camera at its video or sequence; the
 ground truth is dropped (it covers 100 frames). `track --mode LS` runs the first SHORT frames
 and then all FRAMES; the table gives wall time, ms per frame and peak RSS (GNU time's maximum
 resident set size) of each. Not part of CI (the long run takes tens of minutes on 2 cores)."""
@@ -20,8 +22,9 @@ exe = os.path.join(root, "target", "release", "endofuse")
 ap = argparse.ArgumentParser()
 ap.add_argument("--frames", type=int, default=10000)
 ap.add_argument("--short", type=int, default=1000)
-ap.add_argument("--work", default=os.path.join(root, "target", "long-video"))
+ap.add_argument("--work", help="working folder (default target/long-video or target/long-images)")
 ap.add_argument("--mode", default="LS")
+ap.add_argument("--source", choices=("video", "images"), default="video")
 a = ap.parse_args()
 for tool in ("ffmpeg", "ffprobe"):
     if shutil.which(tool) is None:
@@ -31,7 +34,7 @@ if not os.path.exists("/usr/bin/time"):
 if not os.path.exists(exe):
     sys.exit("long_video: build first: cargo build --release")
 
-w = a.work
+w = a.work or os.path.join(root, "target", "long-video" if a.source == "video" else "long-images")
 src = os.path.join(w, "src")
 scene_dir = os.path.join(w, "scene")
 os.makedirs(w, exist_ok=True)
@@ -42,8 +45,26 @@ scene = json.load(open(os.path.join(src, "scene.json")))
 base = 100
 cycle = list(range(base)) + list(range(base - 2, 0, -1))  # forward and back: 198 frames
 os.makedirs(scene_dir, exist_ok=True)
+def link_sequence(name):
+    """A view as an image sequence: frame i is a hard link to the cycle's frame."""
+    folder = os.path.join(scene_dir, name)
+    stamp = folder + ".frames"
+    want = f"{a.frames} frames"
+    if not (os.path.exists(stamp) and open(stamp).read() == want):
+        shutil.rmtree(folder, ignore_errors=True)
+        os.makedirs(folder)
+        for i in range(a.frames):
+            t = cycle[i % len(cycle)]
+            os.link(os.path.join(src, name, f"{t:06}.png"), os.path.join(folder, f"{i:06}.png"))
+        open(stamp, "w").write(want)
+    return f"{name}/{{frame:06}}.png"
+
+
 for cam in scene["cameras"]:
     name = cam["name"]
+    if a.source == "images":
+        cam["frames"] = link_sequence(name)
+        continue
     video = os.path.join(scene_dir, f"{name}.mp4")
     want = f"{a.frames} frames"
     stamp = video + ".frames"
@@ -93,7 +114,8 @@ for n in sorted({a.short, a.frames}):
     shutil.rmtree(out, ignore_errors=True)
 
 print()
-print(f"| frames (1920x1080 stereo, H.264, track --mode {a.mode}) | wall s | ms per frame, all work | fit ms per frame (median) | peak RSS MiB | lost frames |")
+kind = "H.264" if a.source == "video" else "PNG sequence"
+print(f"| frames (1920x1080 stereo, {kind}, track --mode {a.mode}) | wall s | ms per frame, all work | fit ms per frame (median) | peak RSS MiB | lost frames |")
 print("|---|---|---|---|---|---|")
 for n, wall, per, median, rss, lost in rows:
     print(f"| {n} | {wall:.0f} | {per:.1f} | {median:.1f} | {rss:.0f} | {lost} |")

@@ -55,6 +55,10 @@ pub enum VolumeError {
     Transform(f64),
     #[error("the volume is empty (a dimension of size 0)")]
     Empty,
+    #[error(
+        "a header without voxels (the .hdr of a .hdr/.img pair): give a single-file .nii or .nii.gz"
+    )]
+    HeaderOnly,
 }
 
 impl LabelVolume {
@@ -100,23 +104,88 @@ impl LabelVolume {
 
 /// Reads a label volume. Gzip is recognised by its magic bytes, not only by the name.
 pub fn read(path: &Path) -> Result<LabelVolume, VolumeError> {
-    let mut head = Vec::new();
-    {
-        use std::io::Read;
-        std::fs::File::open(path)
-            .and_then(|f| f.take(2).read_to_end(&mut head))
-            .map_err(|e| VolumeError::Read(e.to_string()))?;
+    use std::io::BufRead;
+    let file = std::fs::File::open(path).map_err(|e| VolumeError::Read(e.to_string()))?;
+    let mut source = std::io::BufReader::new(file);
+    let gz = source
+        .fill_buf()
+        .map_err(|e| VolumeError::Read(e.to_string()))?
+        .starts_with(&GZIP_MAGIC);
+    check_gzip_name(path, gz)?;
+    match decode(source, gz) {
+        // A header-only file (the .hdr of a .hdr/.img pair): the crate finds the .img.
+        Err(VolumeError::HeaderOnly) => {
+            let obj = ReaderOptions::new()
+                .read_file(path)
+                .map_err(|e| VolumeError::Read(e.to_string()))?;
+            let header = obj.header().clone();
+            let raw = obj.into_volume().into_raw_data();
+            from_header_and_voxels(&header, &raw)
+        }
+        other => other,
     }
+}
+
+/// [`read`] of a file's bytes already in memory, `name` standing for its path (the `.gz`
+/// check). The fuzzer calls this: writing and re-reading a file per input was most of its time.
+pub fn read_bytes(name: &Path, bytes: &[u8]) -> Result<LabelVolume, VolumeError> {
+    let gz = bytes.starts_with(&GZIP_MAGIC);
+    check_gzip_name(name, gz)?;
+    decode(bytes, gz)
+}
+
+const GZIP_MAGIC: [u8; 2] = [0x1f, 0x8b];
+
+fn check_gzip_name(path: &Path, gz: bool) -> Result<(), VolumeError> {
     let gz_name = path
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("gz"));
-    if gz_name && head != [0x1f, 0x8b] {
+    if gz_name && !gz {
         return Err(VolumeError::NotGzip);
     }
-    let obj = ReaderOptions::new()
-        .read_file(path)
-        .map_err(|e| VolumeError::Read(e.to_string()))?;
-    let header = obj.header().clone();
+    Ok(())
+}
+
+/// Header, then the voxels it describes. The voxel bytes are read as they come, never
+/// reserved by the header's claim: a 40-byte file claiming 10⁹ voxels costs 40 bytes.
+fn decode(source: impl std::io::Read, gz: bool) -> Result<LabelVolume, VolumeError> {
+    if gz {
+        return decode_plain(flate2::read::MultiGzDecoder::new(source));
+    }
+    decode_plain(source)
+}
+
+fn decode_plain(mut source: impl std::io::Read) -> Result<LabelVolume, VolumeError> {
+    use std::io::Read;
+    let read_err = |e: &dyn std::fmt::Display| VolumeError::Read(e.to_string());
+    let header = nifti::NiftiHeader::from_reader(&mut source).map_err(|e| read_err(&e))?;
+    if header.magic == *b"ni1\0" {
+        return Err(VolumeError::HeaderOnly);
+    }
+    let (dims, datatype) = grid(&header)?;
+    // The voxels start at vox_offset, after the 4-byte extender and any extensions (not
+    // needed here). Below 352 (KiTS writes 0) they start right after the extender, as the
+    // `nifti` crate and other readers take it.
+    let start = (header.vox_offset as u64).max(FIRST_VOXEL_BYTE);
+    let skip = start - HEADER_BYTES;
+    std::io::copy(&mut (&mut source).take(skip), &mut std::io::sink()).map_err(|e| read_err(&e))?;
+    let wanted = dims.iter().product::<usize>() * voxel_bytes(datatype)?;
+    let mut raw = Vec::with_capacity(wanted.min(RESERVE_AT_MOST));
+    source
+        .take(wanted as u64)
+        .read_to_end(&mut raw)
+        .map_err(|e| read_err(&e))?;
+    from_header_and_voxels(&header, &raw)
+}
+
+const HEADER_BYTES: u64 = 348;
+/// Header and extender: where voxels start at the earliest in a single file.
+const FIRST_VOXEL_BYTE: u64 = 352;
+/// What the header's claim may reserve up front; more grows as the bytes arrive.
+const RESERVE_AT_MOST: usize = 16 << 20;
+
+/// The grid's size and the datatype, refused when they cannot be a label map.
+fn grid(header: &nifti::NiftiHeader) -> Result<([usize; 3], NiftiType), VolumeError> {
     let ndim = header.dim[0] as usize;
     let dims_all: Vec<usize> = header.dim[1..=ndim.clamp(1, 7)]
         .iter()
@@ -132,10 +201,18 @@ pub fn read(path: &Path) -> Result<LabelVolume, VolumeError> {
     let datatype = header
         .data_type()
         .map_err(|e| VolumeError::Datatype(e.to_string()))?;
-    let raw = obj.into_volume().into_raw_data();
+    voxel_bytes(datatype)?;
+    Ok((dims, datatype))
+}
+
+fn from_header_and_voxels(
+    header: &nifti::NiftiHeader,
+    raw: &[u8],
+) -> Result<LabelVolume, VolumeError> {
+    let (dims, datatype) = grid(header)?;
     let big = header.endianness == nifti::Endianness::Big;
-    let labels = decode_labels(&raw, datatype, big, dims.iter().product())?;
-    let (linear, offset_mm, transform) = world_map(&header);
+    let labels = decode_labels(raw, datatype, big, dims.iter().product())?;
+    let (linear, offset_mm, transform) = world_map(header);
     let det = linear.determinant();
     if !det.is_finite() || det.abs() < 1e-9 {
         return Err(VolumeError::Transform(det));
@@ -150,6 +227,17 @@ pub fn read(path: &Path) -> Result<LabelVolume, VolumeError> {
     })
 }
 
+/// Bytes per voxel of the datatypes that can hold labels.
+fn voxel_bytes(datatype: NiftiType) -> Result<usize, VolumeError> {
+    Ok(match datatype {
+        NiftiType::Uint8 | NiftiType::Int8 => 1,
+        NiftiType::Uint16 | NiftiType::Int16 => 2,
+        NiftiType::Int32 | NiftiType::Uint32 | NiftiType::Float32 => 4,
+        NiftiType::Float64 => 8,
+        other => return Err(VolumeError::Datatype(format!("{other:?}").to_lowercase())),
+    })
+}
+
 /// Raw voxel bytes to labels. `scl_slope`/`scl_inter` are ignored on purpose: label maps
 /// store labels, and KiTS files carry NaN there.
 fn decode_labels(
@@ -158,13 +246,7 @@ fn decode_labels(
     big_endian: bool,
     count: usize,
 ) -> Result<Vec<u16>, VolumeError> {
-    let size = match datatype {
-        NiftiType::Uint8 | NiftiType::Int8 => 1,
-        NiftiType::Uint16 | NiftiType::Int16 => 2,
-        NiftiType::Int32 | NiftiType::Uint32 | NiftiType::Float32 => 4,
-        NiftiType::Float64 => 8,
-        other => return Err(VolumeError::Datatype(format!("{other:?}").to_lowercase())),
-    };
+    let size = voxel_bytes(datatype)?;
     if raw.len() < count * size {
         return Err(VolumeError::Read(format!(
             "{} bytes of voxel data, the header says {}",
@@ -507,6 +589,80 @@ mod tests {
         let back = read(&p).unwrap();
         assert_eq!(back.transform, WorldTransform::Pixdim);
         assert!((back.voxel_volume_mm3() - 0.5 * 0.6 * 0.7).abs() < 1e-6);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// Where the voxels start: after the extender when vox_offset is below 352 (KiTS writes
+    /// 0), at vox_offset otherwise (extensions skipped); bytes in memory read as the file
+    /// does; gzip found by its magic under a plain name; a header that claims more voxels
+    /// than the data hold is refused with both counts.
+    #[test]
+    fn voxel_offset_extensions_bytes_and_lying_headers() {
+        let dir = std::env::temp_dir().join(format!("endofuse-nifti-off-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let vol = LabelVolume {
+            dims: [3, 2, 2],
+            labels: (0..12).map(|n| (n % 5) as u16).collect(),
+            linear: DMat3::IDENTITY,
+            offset_mm: DVec3::ZERO,
+            transform: WorldTransform::Sform,
+            datatype: String::new(),
+        };
+        let p = dir.join("v.nii");
+        write(&p, &vol, WriteTransform::Sform, WriteType::Uint8, false).unwrap();
+        let kits = std::fs::read(&p).unwrap();
+        assert_eq!(
+            read_bytes(&p, &kits).unwrap().labels,
+            vol.labels,
+            "vox_offset 0"
+        );
+        let mut at_352 = kits.clone();
+        at_352[108..112].copy_from_slice(&352f32.to_le_bytes());
+        assert_eq!(
+            read_bytes(&p, &at_352).unwrap().labels,
+            vol.labels,
+            "vox_offset 352"
+        );
+        // An extension of 16 bytes (flagged in the extender) before the voxels.
+        let mut with_ext = at_352[..348].to_vec();
+        with_ext[108..112].copy_from_slice(&368f32.to_le_bytes());
+        with_ext.extend_from_slice(&[1, 0, 0, 0]);
+        with_ext.extend_from_slice(&16i32.to_le_bytes());
+        with_ext.extend_from_slice(&4i32.to_le_bytes());
+        with_ext.extend_from_slice(&[7u8; 8]);
+        with_ext.extend_from_slice(&at_352[352..]);
+        assert_eq!(
+            read_bytes(&p, &with_ext).unwrap().labels,
+            vol.labels,
+            "extension"
+        );
+        std::fs::write(&p, &with_ext).unwrap();
+        assert_eq!(
+            read(&p).unwrap().labels,
+            vol.labels,
+            "extension, from the file"
+        );
+
+        let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+        std::io::Write::write_all(&mut gz, &kits).unwrap();
+        let gz = gz.finish().unwrap();
+        std::fs::write(&p, &gz).unwrap();
+        assert_eq!(read(&p).unwrap().labels, vol.labels, "gzip named .nii");
+        assert!(matches!(
+            read_bytes(Path::new("v.nii.gz"), &kits),
+            Err(VolumeError::NotGzip)
+        ));
+
+        // 1000 x 1000 x 1000 voxels claimed, 12 present.
+        let mut lying = kits.clone();
+        for (n, d) in [1000u16, 1000, 1000].iter().enumerate() {
+            lying[42 + 2 * n..44 + 2 * n].copy_from_slice(&d.to_le_bytes());
+        }
+        let e = read_bytes(&p, &lying).unwrap_err().to_string();
+        assert!(
+            e.contains("12 bytes of voxel data, the header says 1000000000"),
+            "{e}"
+        );
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -8,8 +8,22 @@ use image::{DynamicImage, GrayImage};
 use std::path::Path;
 
 pub fn read_label_png(path: &Path) -> Result<LabelImage, InputError> {
-    let img = image::ImageReader::open(path)
-        .map_err(|e| InputError::new(path, format!("cannot open label image: {e}")))?
+    let reader = image::ImageReader::open(path)
+        .map_err(|e| InputError::new(path, format!("cannot open label image: {e}")))?;
+    decode_label_image(path, reader)
+}
+
+/// [`read_label_png`] of bytes already in memory; `path` names them in errors. (The fuzzer
+/// calls this: a file written and read back per input would be most of its time.)
+pub fn decode_label_png(path: &Path, bytes: &[u8]) -> Result<LabelImage, InputError> {
+    decode_label_image(path, image::ImageReader::new(std::io::Cursor::new(bytes)))
+}
+
+fn decode_label_image<R: std::io::BufRead + std::io::Seek>(
+    path: &Path,
+    reader: image::ImageReader<R>,
+) -> Result<LabelImage, InputError> {
+    let img = reader
         .with_guessed_format()
         .map_err(|e| InputError::new(path, format!("cannot read label image: {e}")))?
         .decode()
