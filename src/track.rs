@@ -9,7 +9,7 @@ use crate::fit::Model;
 use crate::fit::config::{FitConfig, Mode, ResolvedConfig};
 use crate::fit::tracker::{TrackOptions, TrackedFrame, initial_state, track};
 use crate::plane::dice;
-use crate::scene::labels::read_label_png;
+use crate::scene::labels::read_label_png_sized;
 use crate::scene::write::{write_json_atomic, write_labels, write_mask};
 use crate::scene::{Scene, Trajectory, TrajectoryFrame};
 use serde::Serialize;
@@ -334,17 +334,16 @@ impl<'a> Recorder<'a> {
                     _ => continue,
                 };
                 if path.exists() {
-                    let gt = read_label_png(&path)?;
-                    if gt.width != masks[c].width || gt.height != masks[c].height {
-                        return Err(InputError::new(
+                    let (cw, ch) = (masks[c].width, masks[c].height);
+                    let gt = read_label_png_sized(&path, |w, h| {
+                        if (w, h) == (cw, ch) {
+                            return Ok(());
+                        }
+                        Err(InputError::new(
                             &path,
-                            format!(
-                                "hidden-structure mask is {}×{} but the camera is {}×{}",
-                                gt.width, gt.height, masks[c].width, masks[c].height
-                            ),
-                        )
-                        .into());
-                    }
+                            format!("hidden-structure mask is {w}×{h} but the camera is {cw}×{ch}"),
+                        ))
+                    })?;
                     if let Some(d) = dice(&masks[c], &gt.map(|&v| v >= 128)) {
                         self.hidden_dice.entry(name.clone()).or_default().push(d);
                     }

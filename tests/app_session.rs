@@ -1,6 +1,7 @@
 //! The app without a GPU (egui_kittest, no renderer: the overlay falls back to the CPU):
 //! placing the model by dragging, a session saved and loaded back, and the autosave written
-//! after a stroke.
+//! after a stroke. The same session run again under strace: the app opens no socket, runs no
+//! program and writes only the session, its autosaves and the folder the user picked.
 
 use egui::{Event, Modifiers, PointerButton, Pos2, vec2};
 use egui_kittest::Harness;
@@ -25,9 +26,14 @@ impl Dialogs for Scripted {
     }
 }
 
+/// The test's folder; the strace check names it through ENDOFUSE_APP_SCRATCH.
 fn scratch() -> PathBuf {
-    let d = Path::new(env!("CARGO_TARGET_TMPDIR"))
-        .join(format!("endofuse-app-session-{}", std::process::id()));
+    let d = std::env::var_os("ENDOFUSE_APP_SCRATCH")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| {
+            Path::new(env!("CARGO_TARGET_TMPDIR"))
+                .join(format!("endofuse-app-session-{}", std::process::id()))
+        });
     let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).unwrap();
     d
@@ -173,5 +179,49 @@ fn place_by_dragging_save_and_load_a_session_and_autosave() {
     let err = h.state().status.error.clone().unwrap_or_default();
     assert!(err.contains("s.endofuse.json"), "{err}");
     assert_eq!(h.state().doc.editor.counts(), painted);
+    if std::env::var_os("ENDOFUSE_APP_SCRATCH").is_none() {
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
+
+/// The session above (open the demo, place, paint, autosave, save, load, export seeds) run by
+/// this test binary again, under strace: no socket or connection, no program run, and every
+/// write inside the test's folder (session, autosave folder, picked export folder). Mesa's
+/// shader cache is switched off: the driver's cache is the driver's, not the app's.
+#[test]
+fn the_app_opens_no_socket_runs_no_program_and_writes_only_what_the_user_chose() {
+    if !common::strace::available() {
+        return;
+    }
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("endofuse-app-traced-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
+    let mut cmd = std::process::Command::new(std::env::current_exe().unwrap());
+    cmd.args([
+        "--exact",
+        "place_by_dragging_save_and_load_a_session_and_autosave",
+        "--test-threads=1",
+    ])
+    .env("ENDOFUSE_APP_SCRATCH", &dir)
+    .env("MESA_SHADER_CACHE_DISABLE", "true");
+    let log = dir.with_extension("strace");
+    let (out, text) = common::strace::run(&cmd, &log);
+    assert!(
+        out.status.success(),
+        "the traced session failed: {}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+    let bad = common::strace::violations(&text, |p| p.starts_with(&dir));
+    assert!(bad.is_empty(), "{}", bad.join("\n"));
+    // The trace saw the writes it judged: the session and the autosave.
+    assert!(common::strace::wrote(&text, &dir.join("s.endofuse.json")));
+    assert!(common::strace::wrote(&text, &dir.join("autosave")));
+    // And the rule can fail: judged against another folder, the same writes break it.
+    let elsewhere = common::strace::violations(&text, |p| p.starts_with(dir.join("autosave")));
+    assert!(
+        !elsewhere.is_empty(),
+        "writes outside the autosave folder went unseen"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+    let _ = std::fs::remove_file(&log);
 }

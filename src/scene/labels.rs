@@ -8,25 +8,48 @@ use image::{DynamicImage, GrayImage};
 use std::path::Path;
 
 pub fn read_label_png(path: &Path) -> Result<LabelImage, InputError> {
-    let reader = image::ImageReader::open(path)
-        .map_err(|e| InputError::new(path, format!("cannot open label image: {e}")))?;
-    decode_label_image(path, reader)
+    read_label_png_sized(path, |_, _| Ok(()))
 }
 
-/// [`read_label_png`] of bytes already in memory; `path` names them in errors. (The fuzzer
-/// calls this: a file written and read back per input would be most of its time.)
-pub fn decode_label_png(path: &Path, bytes: &[u8]) -> Result<LabelImage, InputError> {
-    decode_label_image(path, image::ImageReader::new(std::io::Cursor::new(bytes)))
+/// [`read_label_png`] whose size (width, height), read from the header, `check` accepts
+/// before any pixel is decoded: a small file claiming a huge image costs nothing.
+pub fn read_label_png_sized(
+    path: &Path,
+    check: impl FnOnce(usize, usize) -> Result<(), InputError>,
+) -> Result<LabelImage, InputError> {
+    let reader = image::ImageReader::open(path)
+        .map_err(|e| InputError::new(path, format!("cannot open label image: {e}")))?;
+    decode_label_image(path, reader, check)
+}
+
+/// [`read_label_png_sized`] of bytes already in memory; `path` names them in errors. (The
+/// fuzzer calls this: a file written and read back per input would be most of its time.)
+pub fn decode_label_png(
+    path: &Path,
+    bytes: &[u8],
+    check: impl FnOnce(usize, usize) -> Result<(), InputError>,
+) -> Result<LabelImage, InputError> {
+    decode_label_image(
+        path,
+        image::ImageReader::new(std::io::Cursor::new(bytes)),
+        check,
+    )
 }
 
 fn decode_label_image<R: std::io::BufRead + std::io::Seek>(
     path: &Path,
     reader: image::ImageReader<R>,
+    check: impl FnOnce(usize, usize) -> Result<(), InputError>,
 ) -> Result<LabelImage, InputError> {
-    let img = reader
+    use image::ImageDecoder;
+    let decoder = reader
         .with_guessed_format()
         .map_err(|e| InputError::new(path, format!("cannot read label image: {e}")))?
-        .decode()
+        .into_decoder()
+        .map_err(|e| InputError::new(path, format!("cannot decode label image: {e}")))?;
+    let (w, h) = decoder.dimensions();
+    check(w as usize, h as usize)?;
+    let img = DynamicImage::from_decoder(decoder)
         .map_err(|e| InputError::new(path, format!("cannot decode label image: {e}")))?;
     let (w, h) = (img.width() as usize, img.height() as usize);
     let data = match img {
@@ -109,6 +132,21 @@ mod tests {
         std::fs::write(&junk, b"\x89PNG\r\n\x1a\nnot really").unwrap();
         assert!(read_label_png(&junk).is_err());
         assert!(read_label_png(&dir.join("missing.png")).is_err());
+
+        // The size check sees the header's size and runs before the pixels are decoded: a
+        // PNG whose pixel data are cut off still gets the check's answer.
+        let bytes = std::fs::read(&p).unwrap();
+        let cut = &bytes[..bytes.len() - 16]; // IEND and the pixel data's end cut off
+        let mut seen = None;
+        let e = decode_label_png(&p, cut, |w, h| {
+            seen = Some((w, h));
+            Err(InputError::new(&p, "not this camera's size"))
+        })
+        .unwrap_err();
+        assert_eq!(seen, Some((3, 2)));
+        assert_eq!(e.problem, "not this camera's size");
+        assert!(decode_label_png(&p, cut, |_, _| Ok(())).is_err());
+        assert_eq!(decode_label_png(&p, &bytes, |_, _| Ok(())).unwrap(), img);
         let _ = std::fs::remove_dir_all(&dir);
     }
 

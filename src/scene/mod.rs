@@ -374,7 +374,9 @@ impl Scene {
         if !path.exists() {
             return None;
         }
-        Some(labels::read_label_png(&path).and_then(|img| self.check_label_size(&path, img, c)))
+        Some(labels::read_label_png_sized(&path, |w, h| {
+            self.check_label_size(&path, w, h, c)
+        }))
     }
 
     /// Which frames have ground-truth labels for every camera.
@@ -394,23 +396,25 @@ impl Scene {
             .collect()
     }
 
+    /// A label image of `width`×`height` fits camera `c`.
     fn check_label_size(
         &self,
         path: &Path,
-        img: LabelImage,
+        width: usize,
+        height: usize,
         c: usize,
-    ) -> Result<LabelImage, InputError> {
+    ) -> Result<(), InputError> {
         let cam = &self.cameras[c];
-        if img.width != cam.width as usize || img.height != cam.height as usize {
+        if width != cam.width as usize || height != cam.height as usize {
             return Err(InputError::new(
                 path,
                 format!(
-                    "label image is {}×{} but camera '{}' is {}×{}",
-                    img.width, img.height, cam.name, cam.width, cam.height
+                    "label image is {width}×{height} but camera '{}' is {}×{}",
+                    cam.name, cam.width, cam.height
                 ),
             ));
         }
-        Ok(img)
+        Ok(())
     }
 
     /// Every ground-truth label image that exists (visible and hidden structures) has its
@@ -489,8 +493,9 @@ impl Scene {
                 if !path.exists() {
                     continue;
                 }
-                let img = labels::read_label_png(&path)
-                    .and_then(|img| self.check_label_size(&path, img, c))?;
+                let img = labels::read_label_png_sized(&path, |w, h| {
+                    self.check_label_size(&path, w, h, c)
+                })?;
                 self.check_seed_values(&path, &img)?;
                 seeds.by_camera[c].insert(t, img);
             }

@@ -4,6 +4,7 @@
 
 #[cfg(feature = "app-tests")]
 pub mod app;
+pub mod strace;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
