@@ -32,6 +32,57 @@ pub struct SeedEditor {
     stroke: Option<Vec<Change>>,
     /// Bumped on every change (textures and autosave compare it).
     pub revision: u64,
+    tally: Tally,
+}
+
+/// Painted pixels per seed value and per frame, kept up to date pixel by pixel: the side
+/// panel, status bar and timeline ask every UI frame, and counting 1080p layers each time
+/// cost the window tens of milliseconds per frame.
+#[derive(Debug, Clone)]
+struct Tally {
+    per_value: Vec<usize>,
+    /// Painted pixels over every camera, per frame that has any.
+    per_frame: BTreeMap<usize, usize>,
+}
+
+impl Default for Tally {
+    fn default() -> Self {
+        Self {
+            per_value: vec![0; 256],
+            per_frame: BTreeMap::new(),
+        }
+    }
+}
+
+impl Tally {
+    fn of(layers: &[BTreeMap<usize, LabelImage>]) -> Self {
+        let mut t = Self::default();
+        for (&frame, img) in layers.iter().flat_map(|m| m.iter()) {
+            for &v in &img.data {
+                t.change(frame, SEED_NONE, v);
+            }
+        }
+        t
+    }
+
+    fn change(&mut self, frame: usize, before: u8, after: u8) {
+        if before == after {
+            return;
+        }
+        if before != SEED_NONE {
+            self.per_value[before as usize] -= 1;
+            if let Some(n) = self.per_frame.get_mut(&frame) {
+                *n -= 1;
+                if *n == 0 {
+                    self.per_frame.remove(&frame);
+                }
+            }
+        }
+        if after != SEED_NONE {
+            self.per_value[after as usize] += 1;
+            *self.per_frame.entry(frame).or_default() += 1;
+        }
+    }
 }
 
 /// What a dab does.
@@ -51,6 +102,7 @@ impl SeedEditor {
         let mut layers = seeds.by_camera.clone();
         layers.resize(sizes.len(), BTreeMap::new());
         Self {
+            tally: Tally::of(&layers),
             layers,
             sizes,
             ..Self::default()
@@ -151,6 +203,7 @@ impl SeedEditor {
                     };
                     if after != before {
                         img.data[i] = after;
+                        self.tally.change(frame, before, after);
                         stroke.push(Change {
                             camera,
                             frame,
@@ -244,23 +297,26 @@ impl SeedEditor {
         let img = self.layers[camera]
             .entry(frame)
             .or_insert_with(|| Plane::filled(w, h, SEED_NONE));
+        self.tally.change(frame, img.data[index as usize], v);
         img.data[index as usize] = v;
     }
 
     /// Painted pixels per seed value over every view and frame.
     pub fn counts(&self) -> BTreeMap<u8, usize> {
-        // Drawn every frame (side panel, status bar): count in place rather than through a
-        // copy of every layer (`seeds()`); the same figures as `Seeds::pixel_counts`.
-        let mut per_value = [0usize; 256];
-        for img in self.layers.iter().flat_map(|m| m.values()) {
-            for &v in &img.data {
-                per_value[v as usize] += 1;
-            }
-        }
         (0..=255u8)
-            .filter(|&v| v != SEED_NONE && per_value[v as usize] > 0)
-            .map(|v| (v, per_value[v as usize]))
+            .filter(|&v| v != SEED_NONE && self.tally.per_value[v as usize] > 0)
+            .map(|v| (v, self.tally.per_value[v as usize]))
             .collect()
+    }
+
+    /// The frames with a painted pixel in any view, in order.
+    pub fn seeded_frames(&self) -> impl Iterator<Item = usize> + '_ {
+        self.tally.per_frame.keys().copied()
+    }
+
+    /// Whether any frame in `frames` has a painted pixel.
+    pub fn any_seeded_in(&self, frames: std::ops::Range<usize>) -> bool {
+        self.tally.per_frame.range(frames).next().is_some()
     }
 }
 
@@ -413,5 +469,57 @@ mod tests {
             0
         );
         assert!(!e.can_undo());
+    }
+
+    /// The running tally (counts per value, seeded frames) equals a recount of the layers
+    /// after random paint, erase, overwrite, undo and redo, starting from a scene's seeds.
+    #[test]
+    fn the_running_tally_equals_a_recount() {
+        let mut start = Seeds::default();
+        start.by_camera = vec![BTreeMap::new(), BTreeMap::new()];
+        let mut first = Plane::filled(40, 30, SEED_NONE);
+        first.data[7] = 2;
+        first.data[8] = SEED_BACKGROUND;
+        start.by_camera[1].insert(4, first);
+        let mut e = SeedEditor::new(&start, vec![(40, 30), (40, 30)]);
+        let mut rng = crate::rng::Rng::new(5);
+        for step in 0..400 {
+            let dab = match rng.below(4) {
+                0 => Dab::Erase,
+                k => Dab::Paint {
+                    value: [1, 2, SEED_BACKGROUND][k - 1],
+                    overwrite: rng.below(2) == 0,
+                },
+            };
+            match rng.below(10) {
+                0 => {
+                    e.undo();
+                }
+                1 => {
+                    e.redo();
+                }
+                _ => {
+                    e.dab(
+                        rng.below(2),
+                        rng.below(6),
+                        rng.range(-5.0, 45.0) as f32,
+                        rng.range(-5.0, 35.0) as f32,
+                        rng.range(0.5, 8.0) as f32,
+                        dab,
+                    );
+                }
+            }
+            let seeds = e.seeds();
+            assert_eq!(e.counts(), seeds.pixel_counts(), "step {step}");
+            assert_eq!(
+                e.seeded_frames().collect::<Vec<_>>(),
+                seeds.seeded_frames(),
+                "step {step}"
+            );
+            assert_eq!(
+                e.any_seeded_in(0..3),
+                seeds.seeded_frames().iter().any(|&t| t < 3)
+            );
+        }
     }
 }

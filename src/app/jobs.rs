@@ -51,7 +51,31 @@ pub struct Jobs {
     pub config: crate::fit::FitConfig,
 }
 
+/// Probability maps kept for frames already shown (scrubbing back shows them at once), up
+/// to this many bytes: at 1080p stereo with three classes one frame's maps take 50 MB, and a
+/// count of frames alone let them grow with the resolution.
+const PROBABILITY_CACHE_BYTES: usize = 256 << 20;
+
 impl Jobs {
+    /// Keeps `frame`'s maps; over [`PROBABILITY_CACHE_BYTES`] the frames farthest from it go
+    /// first (it stays, however large).
+    fn keep_maps(&mut self, frame: usize, maps: Arc<Vec<ProbabilityMaps>>) {
+        let bytes = |m: &Arc<Vec<ProbabilityMaps>>| -> usize {
+            m.iter().map(|p| p.data.len() * std::mem::size_of::<f32>()).sum()
+        };
+        self.probabilities.insert(frame, maps);
+        let mut total: usize = self.probabilities.values().map(bytes).sum();
+        while total > PROBABILITY_CACHE_BYTES && self.probabilities.len() > 1 {
+            let Some(&far) = self.probabilities.keys().max_by_key(|&&t| t.abs_diff(frame)) else {
+                break;
+            };
+            if let Some(m) = self.probabilities.remove(&far) {
+                total -= bytes(&m);
+            }
+            self.probability_refresh.remove(&far);
+        }
+    }
+
     /// Another forest or scene: no maps, request or held-out figure of the earlier one stays.
     fn forget_maps(&mut self) {
         self.probabilities.clear();
@@ -405,11 +429,7 @@ impl EndofuseApp {
                 if !coarse {
                     self.jobs.probability_asked = None;
                 }
-                if self.jobs.probabilities.len() > 8 {
-                    self.jobs.probabilities.clear();
-                    self.jobs.probability_refresh.clear();
-                }
-                self.jobs.probabilities.insert(frame, maps);
+                self.jobs.keep_maps(frame, maps);
                 if coarse {
                     self.jobs.probability_refresh.insert(frame);
                 } else {

@@ -112,7 +112,7 @@ fn side_contents(shown: &Shown, ui: &mut egui::Ui) {
         RichText::new(format!(
             "{} painted pixels on {} frames",
             counts.values().sum::<usize>(),
-            doc.editor.seeds().seeded_frames().len()
+            doc.editor.seeded_frames().count()
         ))
         .weak(),
     );

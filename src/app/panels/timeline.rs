@@ -1,4 +1,5 @@
-//! The timeline: one bar per frame (height = confidence, lost frames red), blue ticks on seeded
+//! The timeline: one bar per frame (height = confidence, lost frames red; per pixel column,
+//! its worst frame, when a long video has more frames than columns), blue ticks on seeded
 //! frames, the tracking range and the current frame; click or drag to scrub. Below it the play
 //! buttons, the frame and range fields and the current frame's figures.
 
@@ -25,26 +26,40 @@ pub fn timeline(shown: &Shown, layout: &mut Layout, ui: &mut egui::Ui) {
         // Darker than the panel, so the timeline's own end is visible.
         painter.rect_filled(rect, 3.0, Color32::from_gray(14));
         let w = rect.width() / n as f32;
-        for t in 0..n {
-            let x0 = rect.left() + t as f32 * w;
+        // One cell per frame, or per pixel column when frames outnumber columns (a long
+        // video): a column shows its worst frame (lost, then the lowest confidence) and a tick
+        // if any of its frames is seeded, so nothing is hidden and the cost does not grow
+        // with the video's length.
+        let cells = n.min(rect.width().max(1.0) as usize).max(1);
+        for k in 0..cells {
+            let frames = k * n / cells..((k + 1) * n / cells).max(k * n / cells + 1);
             let cell = egui::Rect::from_min_max(
-                pos2(x0, rect.top()),
-                pos2(x0 + w.max(1.0), rect.bottom()),
+                pos2(rect.left() + frames.start as f32 * w, rect.top()),
+                pos2(
+                    (rect.left() + frames.end as f32 * w)
+                        .max(rect.left() + frames.start as f32 * w + 1.0),
+                    rect.bottom(),
+                ),
             );
-            if let Some(seeds) = (0..scene.cameras.len()).find_map(|c| doc.editor.layer(c, t))
-                && seeds.data.iter().any(|&v| v != 0)
-            {
+            if doc.editor.any_seeded_in(frames.clone()) {
                 painter.rect_filled(
                     egui::Rect::from_min_max(cell.left_top(), pos2(cell.right(), cell.top() + 4.0)),
                     0.0,
                     Color32::from_rgb(90, 140, 255),
                 );
             }
-            if let Some(r) = doc.results.get(&t) {
+            let worst = doc.results.range(frames.clone()).map(|(_, r)| r).min_by(|a, b| {
+                b.lost
+                    .cmp(&a.lost)
+                    .then(a.confidence.total_cmp(&b.confidence))
+            });
+            let warned =
+                |r: &crate::session::FrameResult| r.confidence < 0.5 || r.depth_explains_zoom;
+            if let Some(r) = worst {
                 let h = (r.confidence.clamp(0.0, 1.0) as f32) * (rect.height() - 8.0);
                 let col = if r.lost {
                     Color32::from_rgb(230, 60, 60)
-                } else if r.confidence < 0.5 || r.depth_explains_zoom {
+                } else if doc.results.range(frames).any(|(_, r)| warned(r)) {
                     Color32::from_rgb(230, 180, 50)
                 } else {
                     Color32::from_rgb(70, 200, 110)
@@ -55,7 +70,8 @@ pub fn timeline(shown: &Shown, layout: &mut Layout, ui: &mut egui::Ui) {
                     rect.bottom() - h
                 };
                 let bar = egui::Rect::from_min_max(pos2(cell.left(), top), cell.right_bottom());
-                painter.rect_filled(bar.shrink2(vec2((w * 0.1).min(1.0), 0.0)), 0.0, col);
+                let cw = cell.width();
+                painter.rect_filled(bar.shrink2(vec2((cw * 0.1).min(1.0), 0.0)), 0.0, col);
             }
         }
         // Frame numbers at a step that leaves ~70 px between labels (1, 2, 5 × 10^k), and the
