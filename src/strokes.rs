@@ -475,8 +475,9 @@ mod tests {
     /// after random paint, erase, overwrite, undo and redo, starting from a scene's seeds.
     #[test]
     fn the_running_tally_equals_a_recount() {
-        let mut start = Seeds::default();
-        start.by_camera = vec![BTreeMap::new(), BTreeMap::new()];
+        let mut start = Seeds {
+            by_camera: vec![BTreeMap::new(), BTreeMap::new()],
+        };
         let mut first = Plane::filled(40, 30, SEED_NONE);
         first.data[7] = 2;
         first.data[8] = SEED_BACKGROUND;

@@ -61,12 +61,18 @@ impl Jobs {
     /// first (it stays, however large).
     fn keep_maps(&mut self, frame: usize, maps: Arc<Vec<ProbabilityMaps>>) {
         let bytes = |m: &Arc<Vec<ProbabilityMaps>>| -> usize {
-            m.iter().map(|p| p.data.len() * std::mem::size_of::<f32>()).sum()
+            m.iter()
+                .map(|p| p.data.len() * std::mem::size_of::<f32>())
+                .sum()
         };
         self.probabilities.insert(frame, maps);
         let mut total: usize = self.probabilities.values().map(bytes).sum();
         while total > PROBABILITY_CACHE_BYTES && self.probabilities.len() > 1 {
-            let Some(&far) = self.probabilities.keys().max_by_key(|&&t| t.abs_diff(frame)) else {
+            let Some(&far) = self
+                .probabilities
+                .keys()
+                .max_by_key(|&&t| t.abs_diff(frame))
+            else {
                 break;
             };
             if let Some(m) = self.probabilities.remove(&far) {

@@ -48,11 +48,15 @@ pub fn timeline(shown: &Shown, layout: &mut Layout, ui: &mut egui::Ui) {
                     Color32::from_rgb(90, 140, 255),
                 );
             }
-            let worst = doc.results.range(frames.clone()).map(|(_, r)| r).min_by(|a, b| {
-                b.lost
-                    .cmp(&a.lost)
-                    .then(a.confidence.total_cmp(&b.confidence))
-            });
+            let worst = doc
+                .results
+                .range(frames.clone())
+                .map(|(_, r)| r)
+                .min_by(|a, b| {
+                    b.lost
+                        .cmp(&a.lost)
+                        .then(a.confidence.total_cmp(&b.confidence))
+                });
             let warned =
                 |r: &crate::session::FrameResult| r.confidence < 0.5 || r.depth_explains_zoom;
             if let Some(r) = worst {
