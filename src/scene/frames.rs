@@ -14,6 +14,9 @@ use std::sync::{Arc, Mutex};
 /// Decoded frames kept at most (across cameras): ~190 MB at 960×540, enough to scrub back and
 /// forth without decoding again.
 pub const DEFAULT_CACHE_FRAMES: usize = 128;
+/// And at most this many bytes of decoded pixels: 128 frames of 1080p took 800 MB, and the
+/// app scrubbing a long 1080p image sequence passed 1 GiB (as the video reader's cache).
+pub const DEFAULT_CACHE_BYTES: usize = 256 << 20;
 
 /// Where one camera's frames come from.
 #[derive(Clone)]
@@ -129,10 +132,12 @@ impl VideoReaders {
     }
 }
 
-/// A least-recently-used cache of decoded frames, keyed by (camera, frame).
+/// A least-recently-used cache of decoded frames, keyed by (camera, frame), bounded in
+/// frames and in bytes (the newest frame always stays).
 #[derive(Debug)]
 pub struct FrameCache {
     capacity: usize,
+    capacity_bytes: usize,
     inner: Mutex<CacheInner>,
 }
 
@@ -140,12 +145,19 @@ pub struct FrameCache {
 struct CacheInner {
     map: HashMap<(usize, usize), Arc<RgbImage>>,
     order: VecDeque<(usize, usize)>,
+    bytes: usize,
 }
 
 impl FrameCache {
+    /// At most `capacity` frames and [`DEFAULT_CACHE_BYTES`].
     pub fn new(capacity: usize) -> Self {
+        Self::bounded(capacity, DEFAULT_CACHE_BYTES)
+    }
+
+    pub fn bounded(capacity: usize, capacity_bytes: usize) -> Self {
         Self {
             capacity: capacity.max(1),
+            capacity_bytes,
             inner: Mutex::new(CacheInner::default()),
         }
     }
@@ -180,12 +192,19 @@ impl FrameCache {
         }
         let img = Arc::new(decode_frame(&path, size)?);
         let mut inner = self.lock();
-        inner.map.insert((c, t), img.clone());
+        if let Some(old) = inner.map.insert((c, t), img.clone()) {
+            inner.bytes -= old.as_raw().len();
+        }
+        inner.bytes += img.as_raw().len();
         inner.order.retain(|k| *k != (c, t));
         inner.order.push_back((c, t));
-        while inner.order.len() > self.capacity {
-            if let Some(old) = inner.order.pop_front() {
-                inner.map.remove(&old);
+        while inner.order.len() > 1
+            && (inner.order.len() > self.capacity || inner.bytes > self.capacity_bytes)
+        {
+            if let Some(old) = inner.order.pop_front()
+                && let Some(gone) = inner.map.remove(&old)
+            {
+                inner.bytes -= gone.as_raw().len();
             }
         }
         Ok(img)
@@ -298,6 +317,16 @@ mod tests {
             );
         }
         assert_eq!(cache.len(), 3);
+        // Bounded in bytes too: 8×6 RGB frames are 144 bytes; 400 bytes hold two.
+        let small = FrameCache::bounded(100, 400);
+        for t in 0..5 {
+            small.get(0, t, &src, (8, 6)).unwrap();
+        }
+        assert_eq!(small.len(), 2);
+        assert_eq!(
+            small.get(0, 4, &src, (8, 6)).unwrap().get_pixel(0, 0).0[0],
+            4
+        );
         let err = cache.get(0, 9, &src, (8, 6)).unwrap_err();
         assert!(err.path.ends_with("9.png"));
         assert!(
