@@ -93,7 +93,7 @@ impl Phase {
         let ui = (
             percentile(&mut self.step_ms, 0.5),
             percentile(&mut self.step_ms, 0.99),
-            self.step_ms.last().copied().unwrap_or(f64::NAN),
+            self.step_ms.iter().copied().fold(f64::NAN, f64::max),
         );
         let shown = (
             percentile(&mut self.shown_ms, 0.5),
