@@ -2,6 +2,7 @@
 //! the same exported features and samples, in one run.
 //!
 //!     cargo bench --bench forest_vs_sklearn
+//!     BENCH_THREADS=1 cargo bench --bench forest_vs_sklearn   # one core each
 //!
 //! Trains on the seed strokes of frames 0–2 of a 960×540 stereo phantom (tools, noise 0.03),
 //! tests on every pixel of frames 5 and 9 in both views against ground truth. The Python half
@@ -90,15 +91,25 @@ fn main() {
     {
         params.max_samples_per_tree = d;
     }
+    // BENCH_THREADS=1 compares one core against one core (both sides), e.g. while the other
+    // core is busy; the default is both cores on both sides.
+    let threads: usize = std::env::var("BENCH_THREADS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(2);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap();
     let s = Instant::now();
-    let (forest, stats) = Forest::train(&train, classes.len(), &params).unwrap();
+    let (forest, stats) = pool.install(|| Forest::train(&train, classes.len(), &params).unwrap());
     let ours_train_s = s.elapsed().as_secs_f64();
     // Best of three for inference.
     let mut ours_predict_s = f64::INFINITY;
     let mut probs = Vec::new();
     for _ in 0..3 {
         let s = Instant::now();
-        probs = forest.predict_many(&test.features);
+        probs = pool.install(|| forest.predict_many(&test.features));
         ours_predict_s = ours_predict_s.min(s.elapsed().as_secs_f64());
     }
     let k = classes.len();
@@ -112,6 +123,7 @@ fn main() {
     let py = std::process::Command::new("python3")
         .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("benches/sklearn_forest.py"))
         .arg(&dir)
+        .arg(threads.to_string())
         .output();
     let sk: Option<serde_json::Value> = match py {
         Ok(out) if out.status.success() => String::from_utf8_lossy(&out.stdout)
@@ -156,6 +168,7 @@ fn main() {
         }
     }
     let mean_extract = extract_ms.iter().sum::<f64>() / extract_ms.len() as f64;
+    println!("threads: {threads} (ours) and n_jobs={threads} (scikit-learn)");
     println!(
         "training samples: {} (features of 6 seeded views: {:.2} s); test pixels: {}",
         train.len(),

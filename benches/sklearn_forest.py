@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """The scikit-learn half of `cargo bench --bench forest_vs_sklearn`: trains
-RandomForestClassifier(n_estimators=20, n_jobs=2) on the exported features and reports training
+RandomForestClassifier(n_estimators=20, n_jobs=THREADS, 2 unless given) on the exported features and reports training
 time, inference throughput (predict_proba) and held-out accuracy as one JSON line.
 Installs scikit-learn and numpy with pip when they are missing."""
 import json, os, subprocess, sys, time
@@ -23,7 +23,8 @@ ytr = np.fromfile(os.path.join(d, "train_y.u8"), dtype=np.uint8)
 xte = np.fromfile(os.path.join(d, "test_x.u8"), dtype=np.uint8).reshape(-1, f).astype(np.float32)
 yte = np.fromfile(os.path.join(d, "test_y.u8"), dtype=np.uint8)
 
-clf = RandomForestClassifier(n_estimators=20, n_jobs=2, random_state=0)
+jobs = int(sys.argv[2]) if len(sys.argv) > 2 else 2
+clf = RandomForestClassifier(n_estimators=20, n_jobs=jobs, random_state=0)
 t = time.perf_counter()
 clf.fit(xtr, ytr)
 train_s = time.perf_counter() - t

@@ -149,11 +149,7 @@ impl Forest {
             })
             .collect();
         let (trees, bags): (Vec<Tree>, Vec<Vec<u32>>) = trained.into_iter().unzip();
-        let forest = Forest {
-            trees,
-            classes,
-            params: params.clone(),
-        };
+        let forest = Forest::new(trees, classes, params.clone());
         // Out-of-bag: each sample voted on only by trees that did not see it.
         let (oob_error, oob_balanced_error) = if params.bootstrap || draws < n {
             let results: Vec<Option<(u8, bool)>> = (0..n)
