@@ -492,8 +492,8 @@ mod tests {
             for (i, c) in s.classes.iter_mut().enumerate() {
                 // Spread over `classes` classes by the same two features, plus a little noise.
                 let f = s.features[i];
-                *c = ((f[3] as usize * classes / 256 + (f[7] as usize % 3 == 0) as usize) % classes)
-                    as u8;
+                *c = ((f[3] as usize * classes / 256 + (f[7] as usize).is_multiple_of(3) as usize)
+                    % classes) as u8;
             }
             let params = ForestParams {
                 trees: 7,
