@@ -180,11 +180,21 @@ enum Command {
 }
 
 fn main() -> ExitCode {
-    // Diagnostics for whoever asks (RUST_LOG=info, =debug, or per module); quiet otherwise,
-    // so that bad input still gets exactly one line.
-    env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("error"))
-        .format_timestamp(None)
-        .init();
+    // Our own warnings (a calibration's baseline not in millimetres, seeds that name no
+    // structure, a truncated video) are shown, as `warning: …` lines: a user must not learn of
+    // them only by asking. Dependencies stay quiet; diagnostics for whoever asks (RUST_LOG=info,
+    // =debug, or per module). A refused input still ends with exactly one error line.
+    env_logger::Builder::from_env(
+        env_logger::Env::default().default_filter_or("error,endofuse=warn"),
+    )
+    .format(|buf, record| {
+        use std::io::Write;
+        match record.level() {
+            log::Level::Warn => writeln!(buf, "warning: {}", record.args()),
+            level => writeln!(buf, "[{level} {}] {}", record.target(), record.args()),
+        }
+    })
+    .init();
     // Whatever happens, one line on stderr, never a backtrace.
     std::panic::set_hook(Box::new(|info| {
         let msg = info

@@ -337,3 +337,43 @@ fn bad_synth_options_are_refused() {
         .unwrap();
     assert_eq!(run.status.code(), Some(2));
 }
+
+/// A doubtful input that is not an error (a baseline of 5 µm: the calibration is in metres)
+/// is said by default, as one `warning:` line naming the value, and the command goes on.
+#[test]
+fn doubtful_inputs_warn_on_stderr_by_default() {
+    let dir = scratch("metres");
+    edit_json(&dir, |j| {
+        j["cameras"][1]["translation"] = serde_json::json!([-0.005, 0, 0]);
+    });
+    let out = common::scratch_dir("bad-metres-out").join("scene");
+    let run = Command::new(env!("CARGO_BIN_EXE_endofuse"))
+        .arg("new-scene")
+        .arg("--out")
+        .arg(&out)
+        .arg("--calib")
+        .arg(dir.join("scene.json"))
+        .arg("--meshes")
+        .arg(dir.join("meshes"))
+        .arg("--view")
+        .arg(format!("left={}", dir.join("left").display()))
+        .arg("--view")
+        .arg(format!("right={}", dir.join("right").display()))
+        .env_remove("RUST_LOG")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(0), "{stderr}");
+    let warnings: Vec<&str> = stderr
+        .lines()
+        .filter(|l| l.starts_with("warning:"))
+        .collect();
+    assert_eq!(warnings.len(), 1, "{stderr}");
+    assert!(
+        warnings[0].contains("translation") && warnings[0].contains("0.005"),
+        "{stderr}"
+    );
+    assert!(out.join("scene.json").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+    let _ = std::fs::remove_dir_all(out.parent().unwrap());
+}
