@@ -142,7 +142,12 @@ impl Forest {
                         depth: 0,
                     },
                 };
+                // In increasing order, the split search's reads of each feature column go
+                // forward through memory instead of jumping at random (the draws' order changes
+                // nothing else: counts, partitions and the tree are the same). Forest bench, one
+                // thread, alternating runs: training 0.32–0.39 s against 0.41–0.56 s unsorted.
                 let mut idx = indices;
+                idx.sort_unstable();
                 builder.push_node();
                 builder.grow(0, &mut idx, 0);
                 (builder.tree, in_bag)
