@@ -180,8 +180,8 @@ enum Command {
 }
 
 fn main() -> ExitCode {
-    // Our own warnings (a calibration's baseline not in millimetres, seeds that name no
-    // structure, a truncated video) are shown, as `warning: …` lines: a user must not learn of
+    // Our own warnings (a calibration's baseline not in millimetres, lines a calibration file
+    // skipped, a truncated video) are shown, as `warning: …` lines: a user must not learn of
     // them only by asking. Dependencies stay quiet; diagnostics for whoever asks (RUST_LOG=info,
     // =debug, or per module). A refused input still ends with exactly one error line.
     env_logger::Builder::from_env(
