@@ -41,6 +41,13 @@ BIN, run = heldout.BIN, heldout.run
 # 701-710 frame by frame, so they joined the tuning set too, and 801-812 were fixed as the test
 # set before anything was chosen: no KiTS shape but case_00023 (the one endophytic patient
 # tumour, whose shape 606 tunes on: the others have no hidden tumour to score).
+# The fourth (session 2026-12-03, after the shape prior was made 64x firmer): `--calibrate` on
+# the 24 tuning scenes chose s 1, e 1.25, d_c 0.005, g 3 (LSC 95.1 % at 4.77 mm against the
+# constants before, 94.6 % at 4.79 mm), but on 801-812 these held the truth in 89.2 % (LSC) /
+# 94.4 % (LS) of the frames, so the constants before were kept: a choice 801-812 informed, so
+# they joined the tuning set too, and 1001-1012 were fixed as the test set before it was run.
+# With the constants before, the 36 tuning scenes gave LSC 92.8 % (and 1001-1012, run once with
+# them, 86.5 %): recalibrated on the 36 (s 8, e 1.5, k 1, d_c 0.01, u 0.75, g 2).
 TUNING = [
     (501, 480, 270, 0.02, 2, None, True),
     (502, 480, 270, 0.05, 2, None, True),
@@ -66,8 +73,6 @@ TUNING = [
     (708, 480, 270, 0.04, 2, "case_00109", True),
     (709, 640, 360, 0.05, 2, None, True),
     (710, 480, 270, 0.03, 2, "case_00130", False),
-]
-TEST = [
     (801, 480, 270, 0.03, 2, None, True),
     (802, 480, 270, 0.05, 2, None, True),
     (803, 640, 360, 0.02, 2, None, True),
@@ -80,6 +85,20 @@ TEST = [
     (810, 480, 270, 0.03, 2, None, True),
     (811, 640, 360, 0.04, 4, None, True),
     (812, 480, 270, 0.02, 2, None, False),
+]
+TEST = [
+    (1001, 480, 270, 0.03, 2, None, True),
+    (1002, 480, 270, 0.05, 2, None, True),
+    (1003, 640, 360, 0.03, 2, None, True),
+    (1004, 480, 270, 0.05, 2, None, False),
+    (1005, 960, 540, 0.04, 2, None, True),
+    (1006, 480, 270, 0.03, 4, None, True),
+    (1007, 640, 360, 0.02, 2, None, True),
+    (1008, 480, 270, 0.04, 2, "case_00023", True),
+    (1009, 960, 540, 0.02, 2, None, True),
+    (1010, 480, 270, 0.05, 2, None, True),
+    (1011, 640, 360, 0.03, 4, None, True),
+    (1012, 480, 270, 0.03, 2, None, False),
 ]
 FRAMES = 24
 

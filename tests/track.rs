@@ -420,7 +420,10 @@ fn a_run_is_reproduced_from_its_metrics_and_its_config_is_honoured() {
     assert_eq!(config["mode"], "L");
     assert_eq!(config["frames"], serde_json::json!([1, 3]));
     assert_eq!(config["fit"]["priors"]["shape"], 128.0);
-    assert_eq!(config["resolved"]["tracked_frame"]["priors"]["shape"], 512.0);
+    assert_eq!(
+        config["resolved"]["tracked_frame"]["priors"]["shape"],
+        512.0
+    );
     assert!(config["resolved"]["first_frame"]["levels"].is_array());
     assert_eq!(
         metrics["forest"]["trees"], 20,
