@@ -228,7 +228,8 @@ fn dice(
     }
 }
 
-/// The forest's settings: the defaults, or APPEARANCE_FOREST_DEPTH / _LEAF / _TREES / _SEED to explore.
+/// The forest's settings: the defaults, or APPEARANCE_FOREST_DEPTH / _LEAF / _TREES / _SEED /
+/// _SAMPLES (cap on each tree's draws) to explore.
 fn forest_params() -> ForestParams {
     let var = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<usize>().ok());
     let mut p = ForestParams::default();
@@ -240,6 +241,9 @@ fn forest_params() -> ForestParams {
     }
     if let Some(t) = var("APPEARANCE_FOREST_TREES") {
         p.trees = t;
+    }
+    if let Some(n) = var("APPEARANCE_FOREST_SAMPLES") {
+        p.max_samples_per_tree = n;
     }
     if let Some(s) = var("APPEARANCE_FOREST_SEED") {
         p.seed = s as u64;

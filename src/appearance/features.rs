@@ -22,11 +22,11 @@ pub const FEATURE_SET: &str = "lab-box-72/1";
 
 /// Window radii (px) at the source frame's resolution (pyramid level 0).
 pub const RADII_PX: [usize; 5] = [1, 2, 4, 8, 12];
-const SCALES: usize = RADII_PX.len();
+pub(super) const SCALES: usize = RADII_PX.len();
 /// Channels with the whole bank (L*, a*, b*) and with value and means only (nr, ng).
-const BANK_CHANNELS: usize = 3;
+pub(super) const BANK_CHANNELS: usize = 3;
 const MEAN_CHANNELS: usize = 2;
-const CHANNELS: usize = BANK_CHANNELS + MEAN_CHANNELS;
+pub(super) const CHANNELS: usize = BANK_CHANNELS + MEAN_CHANNELS;
 /// Features of a bank channel: value; mean, deviation, gradient per scale; differences of
 /// neighbouring scales' means.
 const PER_BANK: usize = 1 + 3 * SCALES + (SCALES - 1);
@@ -71,15 +71,25 @@ pub struct FrameFeatures {
     /// all channels' sums in four reads.
     integrals: Vec<[u32; CHANNELS]>,
     /// Integral image of the bank channels' squares (interleaved), for the local deviation.
-    squares: Vec<[u64; BANK_CHANNELS]>,
+    squares: Vec<[u32; BANK_CHANNELS]>,
     radii: [usize; SCALES],
     /// Where this (possibly cropped) image sits in the full frame, and the full frame's size.
     offset: (usize, usize),
     full: (usize, usize),
 }
 
+/// Every pixel's channels (L*, a*, b*, nr, ng as u8), row-major.
+pub(super) fn base_of(frame: &RgbImage) -> Vec<[u8; CHANNELS]> {
+    frame
+        .as_raw()
+        .par_chunks_exact(3)
+        .with_min_len(4096)
+        .map(|p| base_channels(p[0], p[1], p[2]))
+        .collect()
+}
+
 /// The radii at pyramid `level` (level 0: the source frame).
-fn radii_at(level: usize) -> [usize; SCALES] {
+pub(super) fn radii_at(level: usize) -> [usize; SCALES] {
     RADII_PX.map(|r| ((r as f64 / (1u64 << level.min(16)) as f64).round() as usize).max(1))
 }
 
@@ -93,7 +103,7 @@ pub fn reach_for_level(level: usize) -> usize {
 /// Only a table's first row and column are cleared: [`FrameFeatures::build`] writes every other
 /// entry before reading it.
 static TABLES_SUMS: crate::pool::Pool<[u32; CHANNELS]> = crate::pool::Pool::new();
-static TABLES_SQUARES: crate::pool::Pool<[u64; BANK_CHANNELS]> = crate::pool::Pool::new();
+static TABLES_SQUARES: crate::pool::Pool<[u32; BANK_CHANNELS]> = crate::pool::Pool::new();
 
 /// A (`rows` × `stride`) summed-area table from `pool`, first row and column zero.
 fn table<T: Copy + Default>(pool: &crate::pool::Pool<T>, stride: usize, rows: usize) -> Vec<T> {
@@ -107,29 +117,30 @@ fn table<T: Copy + Default>(pool: &crate::pool::Pool<T>, stride: usize, rows: us
 }
 
 /// The ((w+1)×(h+1)) summed-area table of `value(pixel)` (N values per pixel, interleaved).
-fn summed_area<T, const N: usize>(
-    pool: &crate::pool::Pool<[T; N]>,
+/// Sums wrap: a window's sum is below 2³² (625 · 255² at most), so the difference of four
+/// corners is exact however large the frame.
+fn summed_area<const N: usize>(
+    pool: &crate::pool::Pool<[u32; N]>,
     base: &[[u8; CHANNELS]],
     w: usize,
     h: usize,
-    value: impl Fn(&[u8; CHANNELS], usize) -> T,
-) -> Vec<[T; N]>
+    value: impl Fn(&[u8; CHANNELS], usize) -> u32,
+) -> Vec<[u32; N]>
 where
-    T: Copy + Default + std::ops::Add<Output = T>,
-    [T; N]: Default,
+    [u32; N]: Default,
 {
     let stride = w + 1;
     let mut t = table(pool, stride, h + 1);
     for y in 0..h {
-        let mut row = [T::default(); N];
+        let mut row = [0u32; N];
         for x in 0..w {
             let px = &base[y * w + x];
             let (o, up) = ((y + 1) * stride + x + 1, y * stride + x + 1);
             let above = t[up];
             let cell = &mut t[o];
             for c in 0..N {
-                row[c] = row[c] + value(px, c);
-                cell[c] = above[c] + row[c];
+                row[c] = row[c].wrapping_add(value(px, c));
+                cell[c] = above[c].wrapping_add(row[c]);
             }
         }
     }
@@ -197,16 +208,11 @@ impl FrameFeatures {
 
     fn build(frame: &RgbImage, level: usize, full: (usize, usize), offset: (usize, usize)) -> Self {
         let (w, h) = (frame.width() as usize, frame.height() as usize);
-        let base: Vec<[u8; CHANNELS]> = frame
-            .as_raw()
-            .par_chunks_exact(3)
-            .with_min_len(4096)
-            .map(|p| base_channels(p[0], p[1], p[2]))
-            .collect();
+        let base = base_of(frame);
         // The channels' table and their squares' table, filled in parallel.
         let (sums, squares) = rayon::join(
             || summed_area(&TABLES_SUMS, &base, w, h, |px, c| px[c] as u32),
-            || summed_area(&TABLES_SQUARES, &base, w, h, |px, c| (px[c] as u64).pow(2)),
+            || summed_area(&TABLES_SQUARES, &base, w, h, |px, c| (px[c] as u32).pow(2)),
         );
         Self {
             offset,
@@ -232,20 +238,19 @@ impl FrameFeatures {
     #[inline]
     fn means(&self, x: usize, y: usize, r: usize) -> ([f32; CHANNELS], u32) {
         let (sums, area) = box_sums(&self.integrals, self.width, self.height, x, y, r);
-        (sums.map(|s| s as f32 / area as f32), area)
+        (sums.map(|s| mean(s, area)), area)
     }
 
     /// The feature vector of pixel (x, y).
     pub fn at(&self, x: usize, y: usize) -> FeatureVector {
         let (w, h) = (self.width, self.height);
-        let q = |v: f32| (v.clamp(0.0, 255.0) + 0.5) as u8;
         // Per scale, all channels at once: means, deviations and gradients.
-        let mut mean = [[0f32; CHANNELS]; SCALES];
+        let mut means = [[0f32; CHANNELS]; SCALES];
         let mut std = [[0u8; BANK_CHANNELS]; SCALES];
         let mut grad = [[0u8; BANK_CHANNELS]; SCALES];
         for (i, &r) in self.radii.iter().enumerate() {
-            let (m, area) = self.means(x, y, r);
-            mean[i] = m;
+            let (sums, area) = box_sums(&self.integrals, w, h, x, y, r);
+            means[i] = sums.map(|s| mean(s, area));
             let (sq, _) = box_sums(&self.squares, w, h, x, y, r);
             // Haar gradient at this scale: the window a radius ahead minus the one a radius
             // behind, across and down.
@@ -254,10 +259,8 @@ impl FrameFeatures {
             let (down, _) = self.means(x, (y + r).min(h - 1), r);
             let (up, _) = self.means(x, y.saturating_sub(r), r);
             for c in 0..BANK_CHANNELS {
-                let var = (sq[c] as f64 / area as f64 - (m[c] as f64).powi(2)).max(0.0);
-                std[i][c] = q(3.0 * var.sqrt() as f32);
-                let (gx, gy) = (right[c] - left[c], down[c] - up[c]);
-                grad[i][c] = q(2.0 * (gx * gx + gy * gy).sqrt());
+                std[i][c] = deviation(sums[c], sq[c], area);
+                grad[i][c] = gradient(right[c] - left[c], down[c] - up[c]);
             }
         }
         let mut f = [0u8; FEATURE_COUNT];
@@ -267,7 +270,7 @@ impl FrameFeatures {
             f[o] = value;
             o += 1;
             for i in 0..SCALES {
-                f[o] = q(mean[i][c]);
+                f[o] = quantise(means[i][c]);
                 o += 1;
                 if c < BANK_CHANNELS {
                     f[o] = std[i][c];
@@ -277,7 +280,7 @@ impl FrameFeatures {
             }
             if c < BANK_CHANNELS {
                 for i in 0..SCALES - 1 {
-                    f[o] = q(128.0 + 2.0 * (mean[i][c] - mean[i + 1][c]));
+                    f[o] = difference(means[i][c], means[i + 1][c]);
                     o += 1;
                 }
             }
@@ -286,85 +289,10 @@ impl FrameFeatures {
         f
     }
 
-    /// Features of every pixel, row-major: row by row, each window's means over the whole row
-    /// at once (equal to [`FrameFeatures::at`] bit for bit, three times faster).
+    /// Features of every pixel, row-major, equal to [`FrameFeatures::at`] bit for bit (the
+    /// dense path of [`super::dense`]; it reads only the per-pixel channels).
     pub fn all(&self) -> Vec<FeatureVector> {
-        let (w, h) = (self.width, self.height);
-        let mut out = vec![[0u8; FEATURE_COUNT]; w * h];
-        out.par_chunks_mut(w.max(1)).enumerate().for_each_init(
-            || RowScratch::new(w),
-            |scratch, (y, row)| self.row(y, row, scratch),
-        );
-        out
-    }
-
-    /// Channel `c`'s means over windows of radius `r` centred on row `yc`, for every x.
-    fn row_means(&self, c: usize, yc: usize, r: usize, out: &mut [f32]) {
-        let (w, h) = (self.width, self.height);
-        let s = w + 1;
-        let t = &self.integrals;
-        let (y0, y1) = (yc.saturating_sub(r), (yc + r + 1).min(h));
-        let (top, bottom) = (&t[y0 * s..y0 * s + s], &t[y1 * s..y1 * s + s]);
-        for (x, m) in out.iter_mut().enumerate() {
-            let (x0, x1) = (x.saturating_sub(r), (x + r + 1).min(w));
-            let sum = bottom[x1][c]
-                .wrapping_sub(top[x1][c])
-                .wrapping_sub(bottom[x0][c])
-                .wrapping_add(top[x0][c]);
-            *m = sum as f32 / ((x1 - x0) * (y1 - y0)) as f32;
-        }
-    }
-
-    /// One row of [`FrameFeatures::all`].
-    fn row(&self, y: usize, out: &mut [FeatureVector], sc: &mut RowScratch) {
-        let (w, h) = (self.width, self.height);
-        let q = |v: f32| (v.clamp(0.0, 255.0) + 0.5) as u8;
-        let s = w + 1;
-        let mut o = 0;
-        for c in 0..CHANNELS {
-            for (x, f) in out.iter_mut().enumerate() {
-                f[o] = self.base[y * w + x][c];
-            }
-            o += 1;
-            for (i, &r) in self.radii.iter().enumerate() {
-                self.row_means(c, y, r, &mut sc.means[i]);
-                let means = &sc.means[i];
-                for (f, &m) in out.iter_mut().zip(means) {
-                    f[o] = q(m);
-                }
-                o += 1;
-                if c >= BANK_CHANNELS {
-                    continue;
-                }
-                let (y0, y1) = (y.saturating_sub(r), (y + r + 1).min(h));
-                let sq = &self.squares;
-                let (top, bottom) = (&sq[y0 * s..y0 * s + s], &sq[y1 * s..y1 * s + s]);
-                self.row_means(c, y.saturating_sub(r), r, &mut sc.up);
-                self.row_means(c, (y + r).min(h - 1), r, &mut sc.down);
-                for (x, f) in out.iter_mut().enumerate() {
-                    let (x0, x1) = (x.saturating_sub(r), (x + r + 1).min(w));
-                    let sum2 = bottom[x1][c] + top[x0][c] - top[x1][c] - bottom[x0][c];
-                    let area = ((x1 - x0) * (y1 - y0)) as u64;
-                    let mean = means[x];
-                    let var = (sum2 as f64 / area as f64 - (mean as f64).powi(2)).max(0.0);
-                    f[o] = q(3.0 * var.sqrt() as f32);
-                    let gx = means[(x + r).min(w - 1)] - means[x.saturating_sub(r)];
-                    let gy = sc.down[x] - sc.up[x];
-                    f[o + 1] = q(2.0 * (gx * gx + gy * gy).sqrt());
-                }
-                o += 2;
-            }
-            if c < BANK_CHANNELS {
-                for i in 0..SCALES - 1 {
-                    let (a, b) = (&sc.means[i], &sc.means[i + 1]);
-                    for (x, f) in out.iter_mut().enumerate() {
-                        f[o] = q(128.0 + 2.0 * (a[x] - b[x]));
-                    }
-                    o += 1;
-                }
-            }
-        }
-        debug_assert_eq!(o, FEATURE_COUNT);
+        super::dense::from_base(&self.base, self.width, self.height, self.radii)
     }
 
     /// Features of the listed full-frame pixels (x, y); each must lie in the region.
@@ -389,23 +317,6 @@ pub fn is_specular(rgb: [u8; 3]) -> bool {
     let (hi, lo) = (r.max(g).max(b) as u32, r.min(g).min(b) as u32);
     // hi ≥ 230 and (hi − lo) / hi < 0.25, in integers.
     hi >= 230 && 4 * (hi - lo) < hi
-}
-
-/// Row buffers of [`FrameFeatures::all`], one set per worker.
-struct RowScratch {
-    means: Vec<Vec<f32>>,
-    up: Vec<f32>,
-    down: Vec<f32>,
-}
-
-impl RowScratch {
-    fn new(w: usize) -> Self {
-        Self {
-            means: vec![vec![0.0; w]; SCALES],
-            up: vec![0.0; w],
-            down: vec![0.0; w],
-        }
-    }
 }
 
 /// sRGB (0–255) to linear light.
@@ -434,7 +345,7 @@ pub fn lab(r: u8, g: u8, b: u8) -> [f32; 3] {
     let z = (0.019_333_9 * r + 0.119_192 * g + 0.950_304_1 * b) / 1.088_83;
     let f = |t: f32| {
         if t > 0.008_856 {
-            t.cbrt()
+            cube_root(t)
         } else {
             7.787 * t + 16.0 / 116.0
         }
@@ -443,12 +354,26 @@ pub fn lab(r: u8, g: u8, b: u8) -> [f32; 3] {
     [116.0 * fy - 16.0, 500.0 * (fx - fy), 200.0 * (fy - fz)]
 }
 
+/// The cube root of t in CIELAB's range (0.008856 < t ≲ 1.1): a bit-level first guess (within
+/// ~5 %) and two Halley steps in f64, which leave it correctly rounded to f32 but for a rare
+/// last-bit tie. libm's `cbrtf` was the largest single cost of a frame's features.
+#[inline]
+fn cube_root(t: f32) -> f32 {
+    let t64 = t as f64;
+    let mut y = f32::from_bits(t.to_bits() / 3 + 0x2a51_4067) as f64;
+    for _ in 0..2 {
+        let y3 = y * y * y;
+        y *= (y3 + 2.0 * t64) / (2.0 * y3 + t64);
+    }
+    y as f32
+}
+
 /// L*, a*, b*, nr, ng of one pixel, quantised: L* × 2.55, 128 + 1.5 a* (and b*), 255 c/(r+g+b).
 #[inline]
 fn base_channels(r: u8, g: u8, b: u8) -> [u8; CHANNELS] {
     let [l, a, bb] = lab(r, g, b);
     let recip = reciprocals()[r as usize + g as usize + b as usize] as u64;
-    let q = |v: f32| (v.clamp(0.0, 255.0) + 0.5) as u8;
+    let q = quantise;
     let n = |c: u8| (((c as u64 * recip) + 32768) >> 16).min(255) as u8;
     [
         q(2.55 * l),
@@ -471,6 +396,65 @@ fn reciprocals() -> &'static [u32; 766] {
     })
 }
 
+/// The largest window a feature sums: radius 12 at the source frame.
+const MAX_AREA: usize = {
+    let mut r = 0;
+    let mut i = 0;
+    while i < SCALES {
+        if RADII_PX[i] > r {
+            r = RADII_PX[i];
+        }
+        i += 1;
+    }
+    (2 * r + 1) * (2 * r + 1)
+};
+
+/// 1/n for every window area n: a mean is a multiply, not a division (the features' hottest
+/// arithmetic: 70 means per pixel).
+pub(super) static RECIPROCAL: [f32; MAX_AREA + 1] = {
+    let mut t = [0f32; MAX_AREA + 1];
+    let mut n = 1;
+    while n <= MAX_AREA {
+        t[n] = 1.0 / n as f32;
+        n += 1;
+    }
+    t
+};
+
+/// A window's mean from its sum and pixel count.
+#[inline]
+pub(super) fn mean(sum: u32, area: u32) -> f32 {
+    sum as f32 * RECIPROCAL[area as usize]
+}
+
+/// A feature value (0–255 scale) rounded to u8, saturating.
+#[inline]
+pub(super) fn quantise(v: f32) -> u8 {
+    (v.clamp(0.0, 255.0) + 0.5) as u8
+}
+
+/// Three standard deviations of a window from its sum, sum of squares and pixel count,
+/// quantised. The variance's numerator n·Σv² − (Σv)² is exact in f64 (every term is below
+/// 2⁵³), so a flat bright window gives 0, not a rounding residue.
+#[inline]
+pub(super) fn deviation(sum: u32, sum_sq: u32, area: u32) -> u8 {
+    let (s, s2) = (sum as f64, sum_sq as f64);
+    let spread = (area as f64 * s2 - s * s).max(0.0);
+    quantise(3.0 * (spread as f32).sqrt() * RECIPROCAL[area as usize])
+}
+
+/// Gradient magnitude from the across and down differences of means, quantised.
+#[inline]
+pub(super) fn gradient(gx: f32, gy: f32) -> u8 {
+    quantise(2.0 * (gx * gx + gy * gy).sqrt())
+}
+
+/// The difference of a scale's mean and the next scale's, around 128, quantised.
+#[inline]
+pub(super) fn difference(finer: f32, coarser: f32) -> u8 {
+    quantise(128.0 + 2.0 * (finer - coarser))
+}
+
 /// Corners (x0, y0, x1, y1; end exclusive) of the window of radius r around (x, y), clipped
 /// to a w × h image.
 #[inline]
@@ -484,19 +468,16 @@ fn window(w: usize, h: usize, x: usize, y: usize, r: usize) -> (usize, usize, us
 }
 
 /// Every channel's sum over the window of radius r around (x, y), clipped to the image, and
-/// the window's pixel count. Sums wrap (u32 tables of a huge frame): the difference is exact.
+/// the window's pixel count. Sums wrap (see [`summed_area`]): the difference is exact.
 #[inline]
-fn box_sums<T, const N: usize>(
-    table: &[[T; N]],
+fn box_sums<const N: usize>(
+    table: &[[u32; N]],
     w: usize,
     h: usize,
     x: usize,
     y: usize,
     r: usize,
-) -> ([T; N], u32)
-where
-    T: Copy + WrappingArith,
-{
+) -> ([u32; N], u32) {
     let (x0, y0, x1, y1) = window(w, h, x, y, r);
     let s = w + 1;
     let (a, b, c, d) = (
@@ -505,32 +486,12 @@ where
         &table[y1 * s + x0],
         &table[y0 * s + x0],
     );
-    let sums = std::array::from_fn(|k| a[k].wsub(b[k]).wsub(c[k]).wadd(d[k]));
+    let sums = std::array::from_fn(|k| {
+        a[k].wrapping_sub(b[k])
+            .wrapping_sub(c[k])
+            .wrapping_add(d[k])
+    });
     (sums, ((x1 - x0) * (y1 - y0)) as u32)
-}
-
-/// Wrapping add and subtract, for the summed-area tables' element types.
-trait WrappingArith {
-    fn wadd(self, o: Self) -> Self;
-    fn wsub(self, o: Self) -> Self;
-}
-
-impl WrappingArith for u32 {
-    fn wadd(self, o: Self) -> Self {
-        self.wrapping_add(o)
-    }
-    fn wsub(self, o: Self) -> Self {
-        self.wrapping_sub(o)
-    }
-}
-
-impl WrappingArith for u64 {
-    fn wadd(self, o: Self) -> Self {
-        self.wrapping_add(o)
-    }
-    fn wsub(self, o: Self) -> Self {
-        self.wrapping_sub(o)
-    }
 }
 
 /// Halves a frame by 2×2 averaging (one pyramid level).
@@ -649,6 +610,26 @@ mod tests {
         // Bright but coloured (reddish fat in the light), or colourless but grey: tissue.
         assert!(!is_specular([250, 150, 140]));
         assert!(!is_specular([200, 200, 200]));
+    }
+
+    /// The fast cube root equals f64's, rounded to f32, over CIELAB's whole range.
+    #[test]
+    fn cube_root_is_correctly_rounded_over_labs_range() {
+        let (mut t, mut checked, mut off_by_one_ulp) = (0.008_857f32, 0, 0);
+        while t < 1.2 {
+            let want = (t as f64).cbrt() as f32;
+            let got = cube_root(t);
+            let ulps = (got.to_bits() as i64 - want.to_bits() as i64).abs();
+            assert!(ulps <= 1, "cbrt({t}) = {got}, want {want}");
+            off_by_one_ulp += ulps as usize;
+            checked += 1;
+            t = f32::from_bits(t.to_bits() + 97);
+        }
+        assert!(checked > 100_000);
+        assert!(
+            off_by_one_ulp * 1000 < checked,
+            "{off_by_one_ulp} of {checked} a ulp off"
+        );
     }
 
     #[test]

@@ -2,6 +2,7 @@
 //! §III, eq. 9). Class 0 is background/tools (seed 255, ground truth 0); class k ≥ 1 is the k-th
 //! visible structure. p_f^n is the forest's probability of structure n, p_b^n = 1 − p_f^n.
 
+pub mod dense;
 pub mod features;
 pub mod forest;
 pub mod hint;
@@ -212,12 +213,11 @@ impl Appearance {
 
     /// Every pixel's probabilities as the forest gives them, each pixel on its own.
     pub fn classify_frame_per_pixel(&self, frame: &RgbImage) -> ProbabilityMaps {
-        let ff = FrameFeatures::new(frame);
         ProbabilityMaps {
-            width: ff.width(),
-            height: ff.height(),
+            width: frame.width() as usize,
+            height: frame.height() as usize,
             classes: self.classes.len(),
-            data: self.forest.predict_many(&ff.all()),
+            data: self.forest.predict_many(&dense::frame(frame, 0)),
         }
     }
 
@@ -227,15 +227,14 @@ impl Appearance {
     pub fn classify_coarse(&self, frame: &RgbImage) -> ProbabilityMaps {
         let (w, h) = (frame.width() as usize, frame.height() as usize);
         let half = features::downsample(frame);
-        let ff = FrameFeatures::at_level(&half, 1);
-        let (hw, hh) = (ff.width(), ff.height());
+        let (hw, hh) = (half.width() as usize, half.height() as usize);
         let k = self.classes.len();
         // Smoothed at its own level: half the pixels across, half the σ.
         let coarse = ProbabilityMaps {
             width: hw,
             height: hh,
             classes: k,
-            data: self.forest.predict_many(&ff.all()),
+            data: self.forest.predict_many(&dense::frame(&half, 1)),
         }
         .smoothed(PROBABILITY_SMOOTHING_SIGMA_PX / 2.0)
         .data;
