@@ -34,7 +34,14 @@ fn main() {
         ..SynthOptions::default()
     })
     .expect("phantom");
-    let params = ForestParams::default();
+    let mut params = ForestParams::default();
+    // LIVE_FOREST_SAMPLES caps each tree's draws, to explore.
+    if let Some(n) = std::env::var("LIVE_FOREST_SAMPLES")
+        .ok()
+        .and_then(|v| v.parse().ok())
+    {
+        params.max_samples_per_tree = n;
+    }
     let cache = SampleCache::default();
     let first = TrainingSet::collect(&scene, None, Some(&cache)).expect("seeds");
     // One more stroke on frame 0 of the left view: a short background line.

@@ -28,6 +28,10 @@ pub struct FitSettings {
     pub trees: usize,
     /// Retrain shortly after the strokes change.
     pub live_update: bool,
+    /// Each tree's draws in that live retrain (0: all of them), so the maps follow a stroke at
+    /// once ([`crate::appearance::LIVE_PREVIEW_SAMPLES_PER_TREE`]); tracking and placing
+    /// retrain on all first.
+    pub live_preview_samples: usize,
 }
 
 impl Default for FitSettings {
@@ -36,6 +40,7 @@ impl Default for FitSettings {
             mode: "LSC".into(),
             trees: 20,
             live_update: false,
+            live_preview_samples: crate::appearance::LIVE_PREVIEW_SAMPLES_PER_TREE,
         }
     }
 }

@@ -316,3 +316,55 @@ fn live_update_retrains_after_a_stroke_and_keeps_the_map_shown() {
         "the stroke is one undo step"
     );
 }
+
+/// The live retrain is a preview (each tree draws a sample of the strokes' pixels, so the maps
+/// follow at once); tracking stands on the full forest, trained first.
+#[test]
+fn tracking_after_a_live_preview_retrains_the_full_forest_first() {
+    let _one_at_a_time = one_app();
+    let mut h = harness();
+    step_until(&mut h, "the demo to load", |a| a.doc.scene.is_some());
+    {
+        let app = h.state_mut();
+        app.doc.settings.live_update = true;
+        // The demo's strokes hold ~20k pixels, under the shipped cap: a smaller one here.
+        app.doc.settings.live_preview_samples = 2000;
+    }
+    // A stroke starts the live retrain.
+    h.key_press(Key::Num1);
+    let v = h.state().screen.layout.views[0];
+    let (a, b) = (
+        pos2(v.center().x - 60.0, v.center().y - 60.0),
+        pos2(v.center().x + 60.0, v.center().y - 55.0),
+    );
+    move_to(&mut h, a);
+    press(&mut h, a, true);
+    for i in 1..=8 {
+        move_to(&mut h, a + (b - a) * (i as f32 / 8.0));
+    }
+    press(&mut h, b, false);
+    step_until(&mut h, "the live preview forest", |a| {
+        a.doc
+            .appearance
+            .as_ref()
+            .is_some_and(|f| f.is_live_preview())
+            && a.status.busy.is_none()
+    });
+    let preview = h.state().doc.appearance.clone().unwrap();
+    assert_eq!(preview.forest.params.max_samples_per_tree, 2000);
+    h.state_mut().doc.settings.live_update = false;
+    h.state_mut().track((0, 1));
+    step_until(&mut h, "tracking two frames", |a| {
+        a.status.busy.is_none() && a.doc.results.len() == 2
+    });
+    let forest = h.state().doc.appearance.clone().unwrap();
+    assert!(
+        !forest.is_live_preview(),
+        "tracking used the preview forest"
+    );
+    assert_eq!(forest.forest.params.max_samples_per_tree, 0);
+    assert_eq!(
+        forest.stats.samples, preview.stats.samples,
+        "the same strokes"
+    );
+}

@@ -218,14 +218,42 @@ impl EndofuseApp {
         }
     }
 
-    fn forest_params(&self) -> ForestParams {
+    /// The forest's settings; `live`: the preview retrained after a stroke.
+    fn forest_params(&self, live: bool) -> ForestParams {
         ForestParams {
             trees: self.doc.settings.trees.clamp(1, 200),
+            max_samples_per_tree: if live {
+                self.doc.settings.live_preview_samples
+            } else {
+                0
+            },
             ..ForestParams::default()
         }
     }
 
+    /// Trains the full forest (`Train forest`, T).
     pub fn train(&mut self) {
+        self.train_with(false);
+    }
+
+    /// Tracking and placing stand on the full forest: when the one in use is a live preview,
+    /// the full one is trained first (the worker runs commands in order, so the job that
+    /// follows uses it).
+    fn full_forest_first(&mut self) {
+        if self
+            .doc
+            .appearance
+            .as_ref()
+            .is_some_and(|a| a.is_live_preview())
+        {
+            self.sync_seeds();
+            self.jobs.retrain_due_s = None;
+            self.jobs.train_epoch = self.jobs.forest_epoch;
+            self.send_job(Command::Train(self.forest_params(false)));
+        }
+    }
+
+    fn train_with(&mut self, live: bool) {
         if self.doc.scene.is_none() {
             return;
         }
@@ -239,7 +267,7 @@ impl EndofuseApp {
         self.status
             .busy_with(Task::Train, "Training the forest…".into(), 0);
         self.jobs.train_epoch = self.jobs.forest_epoch;
-        self.send_job(Command::Train(self.forest_params()));
+        self.send_job(Command::Train(self.forest_params(live)));
     }
 
     fn ask_probabilities(&mut self) {
@@ -273,6 +301,7 @@ impl EndofuseApp {
 
     pub(super) fn initialise(&mut self) {
         if self.need_forest() {
+            self.full_forest_first();
             let frame = self.view.frame;
             self.status.busy_with(
                 Task::Initialise,
@@ -304,6 +333,7 @@ impl EndofuseApp {
             .map(|r| r.state.affine)
             .or(self.doc.placement);
         self.view.follow_tracking = true;
+        self.full_forest_first();
         let mode = self.doc.mode();
         self.status.busy_with(
             Task::Track,
@@ -381,8 +411,13 @@ impl EndofuseApp {
             // too: it is not the one in use.
             Event::Trained(_) if self.jobs.train_epoch != self.jobs.forest_epoch => {}
             Event::Trained(a) => {
+                let preview = if a.is_live_preview() {
+                    " (a live preview: each tree drew a sample of them; Track and Place retrain on all)"
+                } else {
+                    ""
+                };
                 self.status.notify(format!(
-                    "Forest trained on {} pixels in {:.2} s; checking it on strokes it did not learn…",
+                    "Forest trained on {} pixels in {:.2} s{preview}; checking it on strokes it did not learn…",
                     a.stats.samples, a.stats.train_s
                 ));
                 self.forest_changed(Some(a));
@@ -646,7 +681,7 @@ impl EndofuseApp {
             // itself never waits: a stroke in progress holds the retrain).
             let due = *self.jobs.retrain_due_s.get_or_insert(now + 0.05);
             if now >= due && self.status.busy.is_none() {
-                self.train();
+                self.train_with(true);
             }
             // Wake when it is due, not on the next input.
             ctx.request_repaint_after(std::time::Duration::from_secs_f64((due - now).max(0.01)));

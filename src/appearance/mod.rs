@@ -204,6 +204,13 @@ impl Appearance {
         })
     }
 
+    /// A forest whose trees drew fewer samples than there were: the app's live preview
+    /// ([`LIVE_PREVIEW_SAMPLES_PER_TREE`]), retrained whole before it tracks or places.
+    pub fn is_live_preview(&self) -> bool {
+        let cap = self.forest.params.max_samples_per_tree;
+        cap != 0 && self.stats.samples > cap
+    }
+
     /// Every pixel's probabilities, smoothed over its neighbourhood
     /// ([`PROBABILITY_SMOOTHING_SIGMA_PX`]): what `classify` and the app's maps show.
     pub fn classify_frame(&self, frame: &RgbImage) -> ProbabilityMaps {
@@ -277,6 +284,17 @@ fn seeds_origin(scene: &Scene) -> String {
 /// best kept); three 5-px boxes, σ 2.45 px in effect. The fit reads single pixels' own
 /// probabilities ([`Appearance::classify_pixels`]), unsmoothed.
 pub const PROBABILITY_SMOOTHING_SIGMA_PX: f32 = 2.5;
+
+/// Cap on each tree's draws when the app retrains live after a stroke, as ilastik's live update
+/// does: the maps must follow the strokes at once. At 960×540 with strokes on six images
+/// (93,663 samples) the forest trains in 127 ms instead of 334 ms, and the coarse maps show
+/// 271 ms after the stroke ends instead of 486 ms (`LIVE_FOREST_SAMPLES=25000 cargo bench
+/// --bench live_update`). The appearance bench's tuning phantoms and real frames did not move
+/// (kidney / tumour within ±0.005), but tracking the project's phantoms (synth 30–33, LSC, two
+/// forest seeds) did, a little: Dice 0.9650 → 0.9634, hidden tumour 1.19 → 1.25 mm. So the
+/// capped forest is a preview: `Train forest`, tracking and placing use the full one, which
+/// the app trains first when it holds a preview ([`Appearance::is_live_preview`]).
+pub const LIVE_PREVIEW_SAMPLES_PER_TREE: usize = 25_000;
 
 /// Pyramid levels whose features train the forest: every level the fit may visit (down to
 /// two below the tracking level of a 1920-wide video).
@@ -461,17 +479,23 @@ fn collect_grouped(
                     img = features::downsample(&img);
                     lab = downsample_seeds(&lab);
                 }
+                // Only the seeded pixels' features (a stroke covers a few % of a frame), their
+                // vectors made in parallel: one stroked image is one job.
                 let ff = FrameFeatures::at_level(&img, level);
                 let rgb = img.as_raw();
-                out.extend(lab.data.iter().enumerate().filter_map(|(i, &v)| {
-                    classes.class_of_seed(v).map(|k| {
-                        let p = [rgb[3 * i], rgb[3 * i + 1], rgb[3 * i + 2]];
-                        (
-                            ff.at(i % lab.width, i / lab.width),
-                            k as u8,
-                            features::is_specular(p),
-                        )
-                    })
+                let seeded: Vec<(usize, u8)> = lab
+                    .data
+                    .iter()
+                    .enumerate()
+                    .filter_map(|(i, &v)| classes.class_of_seed(v).map(|k| (i, k as u8)))
+                    .collect();
+                let at: Vec<(u32, u32)> = seeded
+                    .iter()
+                    .map(|&(i, _)| ((i % lab.width) as u32, (i / lab.width) as u32))
+                    .collect();
+                out.extend(ff.pixels(&at).into_iter().zip(&seeded).map(|(f, &(i, k))| {
+                    let p = [rgb[3 * i], rgb[3 * i + 1], rgb[3 * i + 2]];
+                    (f, k, features::is_specular(p))
                 }));
             }
             let out = Arc::new(out);
