@@ -352,6 +352,11 @@ fn tracking_after_a_live_preview_retrains_the_full_forest_first() {
     });
     let preview = h.state().doc.appearance.clone().unwrap();
     assert_eq!(preview.forest.params.max_samples_per_tree, 2000);
+    let notice = h.state().status.notice.clone().unwrap_or_default();
+    assert!(
+        notice.contains("live preview"),
+        "the status says so: {notice}"
+    );
     h.state_mut().doc.settings.live_update = false;
     h.state_mut().track((0, 1));
     step_until(&mut h, "tracking two frames", |a| {

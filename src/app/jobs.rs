@@ -446,8 +446,13 @@ impl EndofuseApp {
                             "; seed a second frame to check it on strokes it did not learn".into()
                         }
                     };
+                    let preview = if validated.is_live_preview() {
+                        " (a live preview; Track and Place retrain on all)"
+                    } else {
+                        ""
+                    };
                     self.status.notify(format!(
-                        "Forest trained on {} pixels in {:.2} s{check}.",
+                        "Forest trained on {} pixels in {:.2} s{preview}{check}.",
                         validated.stats.samples, validated.stats.train_s
                     ));
                     // The same forest: its maps stay.
