@@ -251,6 +251,22 @@ fn paint_train_track_scrub_and_review_the_demo() {
     assert_eq!(app.doc.editor.counts(), strokes, "nothing painted was lost");
 }
 
+/// Paints one background stroke (brush 1) above the kidney in view `view`, dragged in 8 moves.
+fn background_stroke_above_the_kidney(h: &mut Harness<'_, EndofuseApp>, view: usize) {
+    h.key_press(Key::Num1);
+    let v = h.state().screen.layout.views[view];
+    let (a, b) = (
+        pos2(v.center().x - 60.0, v.center().y - 60.0),
+        pos2(v.center().x + 60.0, v.center().y - 55.0),
+    );
+    move_to(h, a);
+    press(h, a, true);
+    for i in 1..=8 {
+        move_to(h, a + (b - a) * (i as f32 / 8.0));
+    }
+    press(h, b, false);
+}
+
 /// Live update as ilastik users know it: a stroke ends, the forest retrains on its own, the
 /// visible frame's map is never blank meanwhile (the earlier forest's, then a coarse one, then
 /// the full one), and the held-out figure follows.
@@ -271,18 +287,7 @@ fn live_update_retrains_after_a_stroke_and_keeps_the_map_shown() {
     h.state_mut().doc.settings.live_update = true;
     let before = h.state().doc.appearance.as_ref().unwrap().stats.samples;
     // A background stroke above the kidney in the right view.
-    h.key_press(Key::Num1);
-    let v = h.state().screen.layout.views[1];
-    let (a, b) = (
-        pos2(v.center().x - 60.0, v.center().y - 60.0),
-        pos2(v.center().x + 60.0, v.center().y - 55.0),
-    );
-    move_to(&mut h, a);
-    press(&mut h, a, true);
-    for i in 1..=8 {
-        move_to(&mut h, a + (b - a) * (i as f32 / 8.0));
-    }
-    press(&mut h, b, false);
+    background_stroke_above_the_kidney(&mut h, 1);
     assert_eq!(h.state().doc.editor.undo_steps(), 1, "the stroke painted");
     let deadline = std::time::Instant::now() + std::time::Duration::from_secs(120);
     loop {
@@ -331,18 +336,7 @@ fn tracking_after_a_live_preview_retrains_the_full_forest_first() {
         app.doc.settings.live_preview_samples = 2000;
     }
     // A stroke starts the live retrain.
-    h.key_press(Key::Num1);
-    let v = h.state().screen.layout.views[0];
-    let (a, b) = (
-        pos2(v.center().x - 60.0, v.center().y - 60.0),
-        pos2(v.center().x + 60.0, v.center().y - 55.0),
-    );
-    move_to(&mut h, a);
-    press(&mut h, a, true);
-    for i in 1..=8 {
-        move_to(&mut h, a + (b - a) * (i as f32 / 8.0));
-    }
-    press(&mut h, b, false);
+    background_stroke_above_the_kidney(&mut h, 0);
     step_until(&mut h, "the live preview forest", |a| {
         a.doc
             .appearance
