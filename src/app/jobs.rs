@@ -246,11 +246,17 @@ impl EndofuseApp {
             .as_ref()
             .is_some_and(|a| a.is_live_preview())
         {
-            self.sync_seeds();
-            self.jobs.retrain_due_s = None;
-            self.jobs.train_epoch = self.jobs.forest_epoch;
-            self.send_job(Command::Train(self.forest_params(false)));
+            self.send_train(false);
         }
+    }
+
+    /// Sends the worker the current seeds and a Train; a live retrain that was due is
+    /// superseded.
+    fn send_train(&mut self, live: bool) {
+        self.sync_seeds();
+        self.jobs.retrain_due_s = None;
+        self.jobs.train_epoch = self.jobs.forest_epoch;
+        self.send_job(Command::Train(self.forest_params(live)));
     }
 
     fn train_with(&mut self, live: bool) {
@@ -262,12 +268,9 @@ impl EndofuseApp {
                 .fail("Paint some seeds first: background/tools and each structure.");
             return;
         }
-        self.sync_seeds();
-        self.jobs.retrain_due_s = None;
         self.status
             .busy_with(Task::Train, "Training the forest…".into(), 0);
-        self.jobs.train_epoch = self.jobs.forest_epoch;
-        self.send_job(Command::Train(self.forest_params(live)));
+        self.send_train(live);
     }
 
     fn ask_probabilities(&mut self) {
