@@ -479,23 +479,17 @@ fn collect_grouped(
                     img = features::downsample(&img);
                     lab = downsample_seeds(&lab);
                 }
-                // Only the seeded pixels' features (a stroke covers a few % of a frame), their
-                // vectors made in parallel: one stroked image is one job.
                 let ff = FrameFeatures::at_level(&img, level);
                 let rgb = img.as_raw();
-                let seeded: Vec<(usize, u8)> = lab
-                    .data
-                    .iter()
-                    .enumerate()
-                    .filter_map(|(i, &v)| classes.class_of_seed(v).map(|k| (i, k as u8)))
-                    .collect();
-                let at: Vec<(u32, u32)> = seeded
-                    .iter()
-                    .map(|&(i, _)| ((i % lab.width) as u32, (i / lab.width) as u32))
-                    .collect();
-                out.extend(ff.pixels(&at).into_iter().zip(&seeded).map(|(f, &(i, k))| {
-                    let p = [rgb[3 * i], rgb[3 * i + 1], rgb[3 * i + 2]];
-                    (f, k, features::is_specular(p))
+                out.extend(lab.data.iter().enumerate().filter_map(|(i, &v)| {
+                    classes.class_of_seed(v).map(|k| {
+                        let p = [rgb[3 * i], rgb[3 * i + 1], rgb[3 * i + 2]];
+                        (
+                            ff.at(i % lab.width, i / lab.width),
+                            k as u8,
+                            features::is_specular(p),
+                        )
+                    })
                 }));
             }
             let out = Arc::new(out);
