@@ -23,7 +23,8 @@ import sys
 import tempfile
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-BIN = os.path.join(ROOT, "target", "release", "endofuse")
+# ENDOFUSE_BIN runs another build (an earlier main, for a side-by-side table).
+BIN = os.environ.get("ENDOFUSE_BIN") or os.path.join(ROOT, "target", "release", "endofuse")
 KITS = os.path.join(ROOT, "..", "shared", "data", "kits19-shape-set")
 
 # (seed, width, height, noise, views, kits case or None, zoom)
@@ -48,8 +49,9 @@ TUNING = [
     (410, 480, 270, 0.03, 2, "case_00045", True),
     (411, 960, 540, 0.10, 2, None, True),
     (412, 480, 270, 0.02, 4, "case_00050", False),
-]
-TEST = [
+    # The second test set: reported twice (2026-12-03 and -04), and scene 901's lost zoom-out
+    # was studied on 2026-12-04 before the zoom's coarser level was chosen, so it joined the
+    # tuning set; 1301-1312 were fixed before that choice was measured on the tuning set.
     (901, 960, 540, 0.03, 2, None, True),
     (902, 960, 540, 0.10, 2, None, True),
     (903, 960, 540, 0.05, 2, None, False),
@@ -62,6 +64,20 @@ TEST = [
     (910, 480, 270, 0.10, 2, None, True),
     (911, 960, 540, 0.05, 2, None, True),
     (912, 480, 270, 0.03, 4, "case_00130", True),
+]
+TEST = [
+    (1301, 960, 540, 0.03, 2, None, True),
+    (1302, 960, 540, 0.08, 2, None, True),
+    (1303, 960, 540, 0.05, 2, None, False),
+    (1304, 480, 270, 0.10, 2, None, True),
+    (1305, 480, 270, 0.05, 2, None, False),
+    (1306, 480, 270, 0.05, 2, "case_00007", True),
+    (1307, 480, 270, 0.03, 2, "case_00051", True),
+    (1308, 480, 270, 0.05, 4, None, True),
+    (1309, 960, 540, 0.02, 2, "case_00065", True),
+    (1310, 480, 270, 0.10, 2, None, True),
+    (1311, 960, 540, 0.10, 2, None, True),
+    (1312, 480, 270, 0.03, 4, "case_00090", False),
 ]
 FRAMES = 40
 

@@ -248,6 +248,8 @@ struct FrameTracker<'a> {
     good: FitState,
     good_frame: usize,
     first: bool,
+    /// The first frame that was not lost: zoom detection waits while the fit settles after it.
+    first_good_frame: Option<usize>,
     lost_run: usize,
     /// Poses of frames fitted with fixed intrinsics: their motion carries the pose through a
     /// zoom.
@@ -382,6 +384,12 @@ impl<'a> FrameTracker<'a> {
             zoom_refused = true;
             self.cancelled()?;
         }
+        log::debug!(
+            "frame {t}: cameras corrected {correct_cameras}, fx {:.1}, confidence {:.3}, {} lines",
+            fit.state.intrinsics.first().map_or(f64::NAN, |k| k.fx),
+            fit.confidence,
+            fit.lines,
+        );
         let (fit, lost) = self.placed_afresh_if_lost(t, views, fit, &mut refused);
         let depth_explains_zoom = !correct_cameras
             && !lost
@@ -397,6 +405,7 @@ impl<'a> FrameTracker<'a> {
             self.good = fit.state.clone();
             self.good_frame = t;
             self.first = false;
+            self.first_good_frame.get_or_insert(t);
             if !correct_cameras {
                 self.motion.push(t, self.good.affine);
             }
@@ -441,14 +450,22 @@ impl<'a> FrameTracker<'a> {
     }
 
     /// The model's centre at the last good shape, when frame `t` follows that good frame
-    /// directly: a change of apparent size means something only against the frame just
-    /// before (after lost frames the organ may simply be elsewhere).
+    /// directly and the fit has settled: a change of apparent size means something only
+    /// against the frame just before (after lost frames the organ may simply be elsewhere).
     fn centre_after_good_frame(&self, t: usize) -> Option<glam::DVec3> {
-        if self.first || self.good_frame + 1 != t {
+        if self.first || self.good_frame + 1 != t || self.settling(t) {
             return None;
         }
         let model = self.ctx.model;
         Some(self.ctx.model_centre(&model.deformed(&self.good.shape)))
+    }
+
+    /// Whether frame `t` is among the first after the first fitted frame: the fit is still
+    /// converging there (its depth moves millimetres a frame), which the zoom test would take
+    /// for a zoom.
+    fn settling(&self, t: usize) -> bool {
+        let warmup = self.options.config.zoom.detector.warmup_frames;
+        self.first_good_frame.is_none_or(|f| t < f + warmup)
     }
 
     /// A zoom the scene does not mark (LSC): the frame's apparent size jumped with the
@@ -551,6 +568,7 @@ pub fn track(
         good: start,
         good_frame: options.frames.0,
         first: true,
+        first_good_frame: None,
         lost_run: 0,
         motion: MotionHistory::new(options.config.zoom.motion),
         zoom: ZoomDetector::new(options.config.zoom.detector),

@@ -111,6 +111,12 @@ impl FitConfig {
                 p.rounds = p.rounds.max(z.cameras_min_rounds);
                 p.rebuild_every = p.rebuild_every.min(z.cameras_rebuild_every);
                 p.priors.camera_damping *= z.camera_damping_factor;
+                if phase == Phase::Tracked {
+                    p.levels = (0..=z.cameras_coarser_levels)
+                        .rev()
+                        .map(|k| fit_level + k)
+                        .collect();
+                }
             }
             // Only LSC corrects cameras.
             Zoom::Cameras => {}

@@ -157,6 +157,11 @@ impl FitConfig {
             z.cameras_rebuild_every,
             1..=1000,
         )?;
+        within(
+            "zoom.cameras_coarser_levels",
+            z.cameras_coarser_levels,
+            0..=4,
+        )?;
         non_negative("zoom.camera_damping_factor", z.camera_damping_factor)?;
         non_negative("zoom.pose_only_damping_factor", z.pose_only_damping_factor)?;
         within("zoom.settle_frames", z.settle_frames, 0..=1000)?;
@@ -168,6 +173,11 @@ impl FitConfig {
             "zoom.detector.calm_frames",
             z.detector.calm_frames,
             1..=1000,
+        )?;
+        within(
+            "zoom.detector.warmup_frames",
+            z.detector.warmup_frames,
+            0..=1000,
         )?;
         within(
             "zoom.motion.history_frames",
