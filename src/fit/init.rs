@@ -180,6 +180,11 @@ pub fn automatic_pose(
             intrinsics: scene.cameras.iter().map(|c| c.intrinsics).collect(),
         };
         let fit = fit_frame(&ctx, &start, &start, &mut views, Some(appearance), &params);
+        log::debug!(
+            "placement candidate: confidence {:.3}, overlap {:.3}",
+            fit.confidence,
+            score(&rasters(&fit.state.affine, &cams))
+        );
         if best.as_ref().is_none_or(|(c, _)| fit.confidence > *c) {
             best = Some((fit.confidence, fit.state.affine));
         }

@@ -226,7 +226,7 @@ pub struct ZoomDetectorConfig {
     /// from the first frame's estimate there. On tuning phantom 404 (480×270, noise 0.10) its
     /// depth moved 1.6 mm in each of frames 1 and 2 (the organ 0.25 mm), the apparent size
     /// fell 1.9 % in two frames and camera correction switched on at frame 3, nine frames
-    /// before the zoom; fx then stood 4 % short through the whole video.
+    /// before the zoom; fx then erred 7 % on average over the video (2.7 % with the wait).
     pub warmup_frames: usize,
 }
 
@@ -284,11 +284,13 @@ pub struct ZoomConfig {
     /// Lines rebuilt at least every this many steps while the cameras are corrected.
     pub cameras_rebuild_every: usize,
     /// Pyramid levels above the tracking level a tracked frame starts at while the cameras
-    /// are corrected: a zoom moves the rim by more than the lines reach at the tracking level,
-    /// and a frame that fails to follow it is lost and the next starts further behind. On the
-    /// 12 zooming tuning phantoms of `benches/fit_heldout.py` (LSC), 0 / 1 / 2 levels gave
-    /// hidden tumour 2.65 / 2.20 / 2.19 mm, fx error 1.31 / 1.10 / 1.28 %, k1 error at most
-    /// 0.055 / 0.019 / 0.024, Dice 0.905 / 0.907 / 0.904.
+    /// are corrected, for zooms that move the rim further than the tracking level's lines
+    /// reach. Off by default: on the 12 zooming tuning phantoms of `benches/fit_heldout.py`
+    /// (LSC, with the detector's warm-up) one level gave no gain (hidden tumour 2.18 against
+    /// 2.16 mm, fx error 1.06 against 0.96 %, Dice 0.907 against 0.906) and cost up to 1.8×
+    /// per zooming frame. It helps where a zoom-out goes lost: on tuning scene 901 (960×540)
+    /// 5 frames lost instead of 9, fx error 3.5 % instead of 4.3 %. Refitting only the lost
+    /// frames from a coarser level did not recover them there.
     pub cameras_coarser_levels: usize,
     /// Camera damping factor: damping is relative to each parameter's own curvature, but fx is
     /// entangled with fy, cx, k1 and the pose: at 0.1 the focal length ended 6 % behind the
@@ -315,7 +317,7 @@ impl Default for ZoomConfig {
             cameras_shape_damping: 2.0,
             cameras_min_rounds: 1,
             cameras_rebuild_every: 6,
-            cameras_coarser_levels: 1,
+            cameras_coarser_levels: 0,
             camera_damping_factor: 0.01,
             pose_only_damping_factor: 0.1,
             settle_frames: 1,
@@ -479,9 +481,7 @@ mod tests {
         assert_eq!(zoom.priors.pose_damping, 10.0);
         assert_eq!(zoom.priors.shape_damping, 2.0);
         assert_eq!((zoom.rounds, zoom.rebuild_every), (1, 6));
-        // A zoom moves the rim further than the tracking level's lines reach: one level
-        // coarser first.
-        assert_eq!(zoom.levels, vec![2, 1]);
+        assert_eq!(zoom.levels, vec![1]);
         assert!(
             !c.resolve(Mode::LS, Phase::Tracked, Zoom::Cameras, 1)
                 .correct_cameras
