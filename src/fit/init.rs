@@ -181,9 +181,11 @@ pub fn automatic_pose(
         };
         let fit = fit_frame(&ctx, &start, &start, &mut views, Some(appearance), &params);
         log::debug!(
-            "placement candidate: confidence {:.3}, overlap {:.3}",
+            "placement candidate: confidence {:.3}, overlap {:.3}, energy {:.1}, affine {:?}",
             fit.confidence,
-            score(&rasters(&fit.state.affine, &cams))
+            score(&rasters(&fit.state.affine, &cams)),
+            fit.energy,
+            fit.state.affine
         );
         if best.as_ref().is_none_or(|(c, _)| fit.confidence > *c) {
             best = Some((fit.confidence, fit.state.affine));
