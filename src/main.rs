@@ -363,7 +363,7 @@ fn run(cli: Cli) -> Result<()> {
                     &progress("track"),
                 )
             })?;
-            if let Some(r) = endofuse::fit::profile::report(m.frames) {
+            if let Some(r) = endofuse::fit::profile::report() {
                 eprintln!("track: {r}");
             }
             eprintln!(

@@ -265,7 +265,11 @@ impl Appearance {
 
     /// Probabilities of listed pixels of a prepared frame (`classes` values each).
     pub fn classify_pixels(&self, ff: &FrameFeatures, pixels: &[(u32, u32)]) -> Vec<f32> {
-        self.forest.predict_many(&ff.pixels(pixels))
+        let features =
+            crate::fit::profile::time(crate::fit::profile::Phase::SparseFeatures, || {
+                ff.pixels(pixels)
+            });
+        self.forest.predict_many(&features)
     }
 }
 

@@ -9,6 +9,7 @@ use crate::scene::Scene;
 use crate::shape::JointShapeModel;
 use glam::DVec3;
 use std::collections::HashMap;
+use std::sync::Arc;
 
 /// An edge with the two faces that share it (the second may be missing on open meshes).
 #[derive(Debug, Clone, Copy)]
@@ -40,6 +41,23 @@ pub struct Model {
     pub shape: JointShapeModel,
     /// The structure whose weights name the joint vector in outputs (the organ).
     pub anchor: usize,
+    /// The last few shape instances made, by their weights: a frame's steps, lines, priors
+    /// and information ask for the same weights again and again, and the instance (every
+    /// vertex times every mode) was the largest cost of a Gauss–Newton step.
+    instances: InstanceCache,
+}
+
+/// Recent shape instances keyed by their weights' bits (so a hit is the very same instance).
+#[derive(Debug, Default)]
+struct InstanceCache(std::sync::Mutex<Vec<(Vec<u64>, Arc<Vec<Vec<DVec3>>>)>>);
+
+/// Instances kept: a step alternates between the state's and a trial's.
+const INSTANCES_KEPT: usize = 4;
+
+impl Clone for InstanceCache {
+    fn clone(&self) -> Self {
+        Self::default()
+    }
 }
 
 impl Model {
@@ -73,12 +91,33 @@ impl Model {
             structures,
             shape,
             anchor,
+            instances: InstanceCache::default(),
         }
     }
 
-    /// Deformed preoperative vertices of every structure for weights `w`.
-    pub fn deformed(&self, w: &[f64]) -> Vec<Vec<DVec3>> {
-        self.shape.instance(w)
+    /// Deformed preoperative vertices of every structure for weights `w` (shared: the same
+    /// weights give the same instance without computing it again).
+    pub fn deformed(&self, w: &[f64]) -> Arc<Vec<Vec<DVec3>>> {
+        let key: Vec<u64> = w.iter().map(|v| v.to_bits()).collect();
+        let cached = |cache: &[(Vec<u64>, Arc<Vec<Vec<DVec3>>>)]| {
+            cache
+                .iter()
+                .find(|(k, _)| *k == key)
+                .map(|(_, v)| v.clone())
+        };
+        if let Ok(cache) = self.instances.0.lock()
+            && let Some(hit) = cached(&cache)
+        {
+            return hit;
+        }
+        let made = Arc::new(self.shape.instance(w));
+        if let Ok(mut cache) = self.instances.0.lock() {
+            if cache.len() >= INSTANCES_KEPT {
+                cache.remove(0);
+            }
+            cache.push((key, made.clone()));
+        }
+        made
     }
 
     /// Render objects for the structures `which`, from their posed vertices.

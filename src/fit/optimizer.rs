@@ -376,8 +376,12 @@ pub fn fit_frame(
         ctx.build_lines(&state, views, appearance, &ep)
     };
     let energy = ctx.energy(&lines, &state, &ep);
-    let information = (params.information && ctx.model.structures.iter().any(|s| !s.visible))
-        .then(|| super::information::joint_information(ctx, &lines, &matches, &state, &ep, params));
+    let information =
+        (params.information && ctx.model.structures.iter().any(|s| !s.visible)).then(|| {
+            super::profile::time(super::profile::Phase::Information, || {
+                super::information::joint_information(ctx, &lines, &matches, &state, &ep, params)
+            })
+        });
     FrameFit {
         information,
         confidence: confidence(&lines, &state, ctx, &ep),

@@ -4,7 +4,7 @@
 //! timer costs one relaxed load.
 
 use std::sync::OnceLock;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Instant;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -25,9 +25,18 @@ pub enum Phase {
     Steps,
     /// Stereo matching (its forest checks included).
     Stereo,
+    /// The features of the lines' sample pixels (inside [`Phase::Forest`]'s caller).
+    SparseFeatures,
+    /// The rim search of line building (edges, projection, visibility checks).
+    Rim,
+    /// The joint information at the fitted state (hidden regions).
+    Information,
+    /// The whole per-frame time (`ms` of the trajectory).
+    Frame,
 }
 
-const PHASES: [(Phase, &str); 8] = [
+const PHASES: [(Phase, &str); 12] = [
+    (Phase::Frame, "whole frame"),
     (Phase::Pyramid, "pyramids"),
     (Phase::Lines, "lines in all"),
     (Phase::Raster, "visibility raster"),
@@ -36,13 +45,30 @@ const PHASES: [(Phase, &str); 8] = [
     (Phase::Forest, "forest"),
     (Phase::Steps, "steps"),
     (Phase::Stereo, "stereo matching"),
+    (Phase::SparseFeatures, "sample features"),
+    (Phase::Rim, "rim search"),
+    (Phase::Information, "information"),
 ];
 
-static NANOS: [AtomicU64; 8] = [const { AtomicU64::new(0) }; 8];
+static NANOS: [AtomicU64; 12] = [const { AtomicU64::new(0) }; 12];
+/// Tracked frames counted since the first frame (which is left out: it fits coarse to fine).
+static FRAMES: AtomicU64 = AtomicU64::new(0);
 
 pub fn enabled() -> bool {
     static ON: OnceLock<bool> = OnceLock::new();
     *ON.get_or_init(|| std::env::var_os("ENDOFUSE_PROFILE").is_some())
+        && !PAUSED.load(Ordering::Relaxed)
+}
+
+/// Set while work outside the per-frame fit (the output masks) runs: not counted.
+static PAUSED: AtomicBool = AtomicBool::new(false);
+
+/// Runs `f` without counting its time in any phase (work outside the fit's per-frame time).
+pub fn uncounted<T>(f: impl FnOnce() -> T) -> T {
+    PAUSED.store(true, Ordering::Relaxed);
+    let r = f();
+    PAUSED.store(false, Ordering::Relaxed);
+    r
 }
 
 /// Runs `f`, adding its time to `phase` when profiling is on.
@@ -56,12 +82,32 @@ pub fn time<T>(phase: Phase, f: impl FnOnce() -> T) -> T {
     r
 }
 
-/// Milliseconds per frame of each phase over `frames` frames (None when profiling is off).
-pub fn report(frames: usize) -> Option<String> {
-    if !enabled() {
+/// Adds a measured duration to `phase` (for spans that are not one closure).
+pub fn add(phase: Phase, elapsed: std::time::Duration) {
+    NANOS[phase as usize].fetch_add(elapsed.as_nanos() as u64, Ordering::Relaxed);
+}
+
+/// Ends a frame: after the first one (coarse to fine, several times a tracked frame's work)
+/// every phase starts again from zero, so the report is of tracked frames only.
+pub fn frame_done(first: bool, elapsed: std::time::Duration) {
+    if first {
+        for n in &NANOS {
+            n.store(0, Ordering::Relaxed);
+        }
+        FRAMES.store(0, Ordering::Relaxed);
+    } else {
+        add(Phase::Frame, elapsed);
+        FRAMES.fetch_add(1, Ordering::Relaxed);
+    }
+}
+
+/// Mean milliseconds per tracked frame of each phase (None when profiling is off). Phases
+/// inside a per-view parallel loop add up every view's time, so they can exceed the whole.
+pub fn report() -> Option<String> {
+    if std::env::var_os("ENDOFUSE_PROFILE").is_none() {
         return None;
     }
-    let n = frames.max(1) as f64;
+    let n = FRAMES.load(Ordering::Relaxed).max(1) as f64;
     let parts: Vec<String> = PHASES
         .iter()
         .map(|(p, name)| {
@@ -69,5 +115,5 @@ pub fn report(frames: usize) -> Option<String> {
             format!("{name} {ms:.1}")
         })
         .collect();
-    Some(format!("ms per frame: {}", parts.join(", ")))
+    Some(format!("ms per tracked frame: {}", parts.join(", ")))
 }

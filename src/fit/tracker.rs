@@ -615,7 +615,9 @@ pub fn track(
             );
             tracker.zoom_history = tracker.zoom_history.with_reference(&tracker.regions);
         }
-        let ms = started.elapsed().as_secs_f64() * 1e3;
+        let elapsed = started.elapsed();
+        super::profile::frame_done(t == options.frames.0, elapsed);
+        let ms = elapsed.as_secs_f64() * 1e3;
         let Rendered {
             mut labels,
             hidden,
@@ -632,14 +634,20 @@ pub fn track(
         };
         let hidden_regions = super::hidden_region::with_margins(model, &state, hidden_regions);
         let region_masks = region_masks(&cameras_of(scene, &state), &hidden, &hidden_regions);
-        for (l, view) in labels.iter_mut().zip(views.iter_mut()) {
-            mask_occluders(
-                l,
-                view,
-                appearance,
-                options.fit_level(),
-                &options.config.tracking,
-            );
+        for (l, view) in labels
+            .iter_mut()
+            .zip(views.iter_mut())
+            .filter(|_| std::env::var_os("ENDOFUSE_SKIP_OCCLUDERS").is_none())
+        {
+            super::profile::uncounted(|| {
+                mask_occluders(
+                    l,
+                    view,
+                    appearance,
+                    options.fit_level(),
+                    &options.config.tracking,
+                )
+            });
         }
         on_frame(TrackedFrame {
             frame: t,

@@ -66,6 +66,7 @@ impl FrameContext<'_> {
                 let (w, h) = (size.0 as i64, size.1 as i64);
                 let mut taken = std::collections::HashSet::new();
                 let mut view_lines = Vec::new();
+                let rim_started = crate::fit::profile::enabled().then(std::time::Instant::now);
                 for (oi, &si) in visible.iter().enumerate() {
                     let st = &self.model.structures[si];
                     let verts = &posed[si];
@@ -169,6 +170,9 @@ impl FrameContext<'_> {
                             samples,
                         });
                     }
+                }
+                if let Some(t) = rim_started {
+                    crate::fit::profile::add(crate::fit::profile::Phase::Rim, t.elapsed());
                 }
                 let pixels: Vec<u32> = view_lines
                     .iter()
