@@ -61,9 +61,11 @@ pub fn step(
     let stereo_term = StereoTerm::new(ctx, stereo, state, &deformed, params.stereo);
     let terms: [&dyn ImageTerm; 2] = [&line_term, &stereo_term];
     let mut eq = NormalEquations::zeros(n);
-    for term in terms {
-        term.add_normal_equations(state, &deformed, block, &mut eq);
-    }
+    super::profile::time(super::profile::Phase::NormalEquations, || {
+        for term in terms {
+            term.add_normal_equations(state, &deformed, block, &mut eq);
+        }
+    });
     eq.symmetrise();
     // A rig zooms as one: its cameras' intrinsics change by one shared increment, solved
     // for from the per-camera equations (Table III). Per camera, a relative shift of the
@@ -111,7 +113,7 @@ pub fn step(
     let cholesky = eq.h.clone().cholesky()?;
     // Accept only steps that lower the objective: the image terms on these lines and matches
     // plus the priors just added, the very energy the normal equations approximate.
-    let objective = |st: &FitState| {
+    let objective_at = |st: &FitState| {
         let moved;
         let d = if block == Block::Shape {
             moved = ctx.model.deformed(&st.shape);
@@ -120,6 +122,9 @@ pub fn step(
             &deformed
         };
         terms.iter().map(|t| t.energy(st, d)).sum::<f64>() + priors.energy(st)
+    };
+    let objective = |st: &FitState| {
+        super::profile::time(super::profile::Phase::Objective, || objective_at(st))
     };
     let before = objective(state);
     let try_step = |delta: &DVector<f64>, tries: usize| -> Option<FitState> {

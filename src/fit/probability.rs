@@ -214,15 +214,6 @@ impl ViewProbabilities {
             let (iw, ih) = (image.width() as usize, image.height() as usize);
             let (rx0, ry0) = (x0.saturating_sub(margin), y0.saturating_sub(margin));
             let (rx1, ry1) = ((x1 + margin).min(iw - 1), (y1 + margin).min(ih - 1));
-            if std::env::var_os("ENDOFUSE_REGION_DEBUG").is_some() {
-                eprintln!(
-                    "region L{level} {:?} -> {}x{} ({} missing)",
-                    lv.region,
-                    rx1 + 1 - rx0,
-                    ry1 + 1 - ry0,
-                    missing.len()
-                );
-            }
             lv.region = Some((rx0, ry0, rx1 + 1 - rx0, ry1 + 1 - ry0));
             lv.features = Some(super::profile::time(
                 super::profile::Phase::Features,

@@ -33,9 +33,13 @@ pub enum Phase {
     Information,
     /// The whole per-frame time (`ms` of the trajectory).
     Frame,
+    /// Inside the steps: the image terms' normal equations.
+    NormalEquations,
+    /// Inside the steps: evaluations of the objective (trial states).
+    Objective,
 }
 
-const PHASES: [(Phase, &str); 12] = [
+const PHASES: [(Phase, &str); 14] = [
     (Phase::Frame, "whole frame"),
     (Phase::Pyramid, "pyramids"),
     (Phase::Lines, "lines in all"),
@@ -48,9 +52,11 @@ const PHASES: [(Phase, &str); 12] = [
     (Phase::SparseFeatures, "sample features"),
     (Phase::Rim, "rim search"),
     (Phase::Information, "information"),
+    (Phase::NormalEquations, "normal equations"),
+    (Phase::Objective, "objective"),
 ];
 
-static NANOS: [AtomicU64; 12] = [const { AtomicU64::new(0) }; 12];
+static NANOS: [AtomicU64; 14] = [const { AtomicU64::new(0) }; 14];
 /// Tracked frames counted since the first frame (which is left out: it fits coarse to fine).
 static FRAMES: AtomicU64 = AtomicU64::new(0);
 

@@ -634,11 +634,7 @@ pub fn track(
         };
         let hidden_regions = super::hidden_region::with_margins(model, &state, hidden_regions);
         let region_masks = region_masks(&cameras_of(scene, &state), &hidden, &hidden_regions);
-        for (l, view) in labels
-            .iter_mut()
-            .zip(views.iter_mut())
-            .filter(|_| std::env::var_os("ENDOFUSE_SKIP_OCCLUDERS").is_none())
-        {
+        for (l, view) in labels.iter_mut().zip(views.iter_mut()) {
             super::profile::uncounted(|| {
                 mask_occluders(
                     l,

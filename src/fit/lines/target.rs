@@ -24,8 +24,16 @@ pub fn line_target(line: &Line, c: DVec2, ep: &EnergyParams) -> (f64, f64) {
         .collect();
     let lo = offsets.iter().copied().min().unwrap_or(0) - r;
     let hi = offsets.iter().copied().max().unwrap_or(0) + r;
+    // e^(−(t₀ + m)/w) = e^(−t₀/w) · e^(−1/w)^m: one `exp` and a running product per line.
+    let first = (-(t0 + lo as f64) / ep.heaviside_px).exp();
+    let ratio = (-1.0 / ep.heaviside_px).exp();
+    let mut power = first;
     let heaviside: Vec<f64> = (lo..=hi)
-        .map(|m| 1.0 / (1.0 + (-(t0 + m as f64) / ep.heaviside_px).exp()))
+        .map(|_| {
+            let h = 1.0 / (1.0 + power);
+            power *= ratio;
+            h
+        })
         .collect();
     let profile: Vec<f64> = (-r..=r)
         .map(|delta| {
