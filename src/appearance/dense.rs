@@ -308,4 +308,31 @@ mod tests {
             }
         }
     }
+
+    /// A region's many-pixel query (computed densely) equals its per-pixel query, on a region
+    /// cut from the middle of a frame and one touching its corner, at two levels.
+    #[test]
+    fn a_regions_dense_query_equals_its_per_pixel_query() {
+        let mut rng = Rng::new(17);
+        let img = RgbImage::from_fn(150, 90, |_, _| {
+            image::Rgb([
+                rng.below(256) as u8,
+                rng.below(256) as u8,
+                rng.below(256) as u8,
+            ])
+        });
+        for (x0, y0, w, h) in [(20usize, 10usize, 101usize, 67usize), (0, 0, 90, 60)] {
+            for level in [0, 1] {
+                let ff = FrameFeatures::region(&img, level, x0, y0, w, h);
+                // Every pixel of the region: well over the dense path's threshold.
+                let list: Vec<(u32, u32)> = (y0..y0 + h)
+                    .flat_map(|y| (x0..x0 + w).map(move |x| (x as u32, y as u32)))
+                    .collect();
+                assert!(
+                    ff.pixels_auto(&list) == ff.pixels(&list),
+                    "region at ({x0},{y0})"
+                );
+            }
+        }
+    }
 }

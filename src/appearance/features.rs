@@ -88,6 +88,9 @@ pub(super) fn base_of(frame: &RgbImage) -> Vec<[u8; CHANNELS]> {
     out
 }
 
+/// Below this many pixels [`FrameFeatures::pixels_auto`] always queries them one by one.
+const DENSE_FROM_PIXELS: usize = 4096;
+
 /// Pixels converted together by [`base_channels_many`]: the lanes of its vector arithmetic.
 const LANES: usize = 8;
 
@@ -404,6 +407,26 @@ impl FrameFeatures {
     /// dense path of [`super::dense`]; it reads only the per-pixel channels).
     pub fn all(&self) -> Vec<FeatureVector> {
         super::dense::from_base(&self.base, self.width, self.height, self.radii)
+    }
+
+    /// [`FrameFeatures::pixels`], computed for the whole region at once in the dense layout
+    /// (~4× cheaper per pixel, equal bit for bit) when the list covers a third of it or more:
+    /// the tracker's occluder check asks for every pixel inside the fitted organs, ~50,000 a
+    /// view at 960×540, and those per-pixel queries were the largest cost of `track`'s frame.
+    pub fn pixels_auto(&self, list: &[(u32, u32)]) -> Vec<FeatureVector> {
+        let area = self.width * self.height;
+        if list.len() < DENSE_FROM_PIXELS || list.len() * 3 < area {
+            return self.pixels(list);
+        }
+        let all = super::dense::from_base(&self.base, self.width, self.height, self.radii);
+        let (ox, oy) = self.offset;
+        list.iter()
+            .map(|&(x, y)| {
+                let lx = (x as usize).saturating_sub(ox).min(self.width - 1);
+                let ly = (y as usize).saturating_sub(oy).min(self.height - 1);
+                all[ly * self.width + lx]
+            })
+            .collect()
     }
 
     /// Features of the listed full-frame pixels (x, y); each must lie in the region.

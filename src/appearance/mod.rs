@@ -267,7 +267,7 @@ impl Appearance {
     pub fn classify_pixels(&self, ff: &FrameFeatures, pixels: &[(u32, u32)]) -> Vec<f32> {
         let features =
             crate::fit::profile::time(crate::fit::profile::Phase::SparseFeatures, || {
-                ff.pixels(pixels)
+                ff.pixels_auto(pixels)
             });
         self.forest.predict_many(&features)
     }

@@ -47,9 +47,12 @@ pub struct Model {
     instances: InstanceCache,
 }
 
+/// Every structure's deformed vertices: one shape instance.
+pub type Instance = Arc<Vec<Vec<DVec3>>>;
+
 /// Recent shape instances keyed by their weights' bits (so a hit is the very same instance).
 #[derive(Debug, Default)]
-struct InstanceCache(std::sync::Mutex<Vec<(Vec<u64>, Arc<Vec<Vec<DVec3>>>)>>);
+struct InstanceCache(std::sync::Mutex<Vec<(Vec<u64>, Instance)>>);
 
 /// Instances kept: a step alternates between the state's and a trial's.
 const INSTANCES_KEPT: usize = 4;
@@ -97,9 +100,9 @@ impl Model {
 
     /// Deformed preoperative vertices of every structure for weights `w` (shared: the same
     /// weights give the same instance without computing it again).
-    pub fn deformed(&self, w: &[f64]) -> Arc<Vec<Vec<DVec3>>> {
+    pub fn deformed(&self, w: &[f64]) -> Instance {
         let key: Vec<u64> = w.iter().map(|v| v.to_bits()).collect();
-        let cached = |cache: &[(Vec<u64>, Arc<Vec<Vec<DVec3>>>)]| {
+        let cached = |cache: &[(Vec<u64>, Instance)]| {
             cache
                 .iter()
                 .find(|(k, _)| *k == key)

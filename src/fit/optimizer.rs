@@ -123,9 +123,8 @@ pub fn step(
         };
         terms.iter().map(|t| t.energy(st, d)).sum::<f64>() + priors.energy(st)
     };
-    let objective = |st: &FitState| {
-        super::profile::time(super::profile::Phase::Objective, || objective_at(st))
-    };
+    let objective =
+        |st: &FitState| super::profile::time(super::profile::Phase::Objective, || objective_at(st));
     let before = objective(state);
     let try_step = |delta: &DVector<f64>, tries: usize| -> Option<FitState> {
         if delta.iter().any(|v| !v.is_finite()) {

@@ -110,9 +110,7 @@ pub fn frame_done(first: bool, elapsed: std::time::Duration) {
 /// Mean milliseconds per tracked frame of each phase (None when profiling is off). Phases
 /// inside a per-view parallel loop add up every view's time, so they can exceed the whole.
 pub fn report() -> Option<String> {
-    if std::env::var_os("ENDOFUSE_PROFILE").is_none() {
-        return None;
-    }
+    std::env::var_os("ENDOFUSE_PROFILE")?;
     let n = FRAMES.load(Ordering::Relaxed).max(1) as f64;
     let parts: Vec<String> = PHASES
         .iter()

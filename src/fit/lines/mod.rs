@@ -125,15 +125,24 @@ impl HeavisideTable {
         let reach = 2 * half_length as i64 + 2;
         Self {
             width,
-            shifts: (-reach..=reach).map(|m| (-(m as f64) / width).exp()).collect(),
+            shifts: (-reach..=reach)
+                .map(|m| (-(m as f64) / width).exp())
+                .collect(),
             reach,
         }
     }
 
     /// (H(d_s), H'(d_s)) of every sample of `line` with the contour point at `c`.
     #[inline]
-    pub fn of_line<'a>(&'a self, line: &'a Line, c: DVec2) -> impl Iterator<Item = (f64, f64)> + 'a {
-        let t0 = line.samples.first().map_or(0.0, |s| line.normal.dot(c - s.pos));
+    pub fn of_line<'a>(
+        &'a self,
+        line: &'a Line,
+        c: DVec2,
+    ) -> impl Iterator<Item = (f64, f64)> + 'a {
+        let t0 = line
+            .samples
+            .first()
+            .map_or(0.0, |s| line.normal.dot(c - s.pos));
         let first = (-t0 / self.width).exp();
         line.samples.iter().map(move |s| {
             let d = line.normal.dot(c - s.pos);
