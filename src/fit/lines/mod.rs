@@ -100,6 +100,22 @@ pub struct Line {
     pub samples: Vec<Sample>,
 }
 
+impl Line {
+    /// A line of view 0 and structure 0 on the edge (0, 1), for unit tests.
+    #[cfg(test)]
+    pub(crate) fn for_tests(normal: DVec2, samples: Vec<Sample>) -> Self {
+        Self {
+            view: 0,
+            structure: 0,
+            a: 0,
+            b: 1,
+            t: 0.5,
+            normal,
+            samples,
+        }
+    }
+}
+
 /// The logistic Heaviside H(d) of width `width` and its derivative H'(d).
 pub(crate) fn heaviside(d: f64, width: f64) -> (f64, f64) {
     let h = 1.0 / (1.0 + (-d / width).exp());
@@ -433,15 +449,7 @@ mod tests {
                 p_f: 0.0,
             })
             .collect();
-        let line = Line {
-            view: 0,
-            structure: 0,
-            a: 0,
-            b: 1,
-            t: 0.5,
-            normal,
-            samples,
-        };
+        let line = Line::for_tests(normal, samples);
         for width in [0.5, 1.2, 3.0] {
             let table = HeavisideTable::new(width, 10);
             for shift in [-900.0, -30.0, -10.5, -2.25, 0.0, 0.3, 7.75, 12.0, 900.0] {

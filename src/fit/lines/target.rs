@@ -146,16 +146,7 @@ mod tests {
                 }
             })
             .collect();
-        let line = Line {
-            view: 0,
-            structure: 0,
-            a: 0,
-            b: 1,
-            t: 0.5,
-            normal: DVec2::X,
-            samples,
-        };
-        (line, c)
+        (Line::for_tests(DVec2::X, samples), c)
     }
 
     #[test]
