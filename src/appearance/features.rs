@@ -418,26 +418,30 @@ impl FrameFeatures {
         if list.len() < DENSE_FROM_PIXELS || list.len() * 3 < area {
             return self.pixels(list);
         }
-        let all = super::dense::from_base(&self.base, self.width, self.height, self.radii);
-        let (ox, oy) = self.offset;
+        let all = self.all();
         list.iter()
             .map(|&(x, y)| {
-                let lx = (x as usize).saturating_sub(ox).min(self.width - 1);
-                let ly = (y as usize).saturating_sub(oy).min(self.height - 1);
+                let (lx, ly) = self.local(x, y);
                 all[ly * self.width + lx]
             })
             .collect()
     }
 
+    /// The region's own coordinates of full-frame pixel (x, y), clamped into the region.
+    fn local(&self, x: u32, y: u32) -> (usize, usize) {
+        let (ox, oy) = self.offset;
+        (
+            (x as usize).saturating_sub(ox).min(self.width - 1),
+            (y as usize).saturating_sub(oy).min(self.height - 1),
+        )
+    }
+
     /// Features of the listed full-frame pixels (x, y); each must lie in the region.
     pub fn pixels(&self, list: &[(u32, u32)]) -> Vec<FeatureVector> {
-        let (ox, oy) = self.offset;
         list.par_iter()
             .map(|&(x, y)| {
-                self.at(
-                    (x as usize).saturating_sub(ox).min(self.width - 1),
-                    (y as usize).saturating_sub(oy).min(self.height - 1),
-                )
+                let (lx, ly) = self.local(x, y);
+                self.at(lx, ly)
             })
             .collect()
     }

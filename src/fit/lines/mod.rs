@@ -175,21 +175,6 @@ impl HeavisideTable {
 /// Lines per parallel work item in sums over lines (fixed, so sums are reproducible).
 pub const LINE_CHUNK: usize = 64;
 
-/// Below this many lines a sum over them runs on the calling thread: a tracked frame's ~250
-/// lines take tens of microseconds, less than waking a second thread, and a frame makes some
-/// 30 such sums. The chunks and their order stay the same, so the sums are equal either way.
-pub const PARALLEL_FROM_LINES: usize = 8 * LINE_CHUNK;
-
-/// `f` of every fixed chunk of `lines`, in order: in parallel for many lines, on the calling
-/// thread for few (the same results).
-pub fn per_chunk<T: Send>(lines: &[Line], f: impl Fn(&[Line]) -> T + Sync + Send) -> Vec<T> {
-    if lines.len() < PARALLEL_FROM_LINES {
-        lines.chunks(LINE_CHUNK).map(f).collect()
-    } else {
-        lines.par_chunks(LINE_CHUNK).map(f).collect()
-    }
-}
-
 impl FrameContext<'_> {
     /// The rim point of a line in camera-0 coordinates and its deformed preoperative position.
     fn rim_point(&self, line: &Line, state: &FitState, deformed: &[Vec<DVec3>]) -> (DVec3, DVec3) {
@@ -239,7 +224,10 @@ impl FrameContext<'_> {
                 .sum::<f64>()
         };
         // Fixed chunks summed in order: parallel, and the same sum on every run.
-        per_chunk(lines, |chunk| chunk.iter().map(line_energy).sum::<f64>())
+        lines
+            .par_chunks(LINE_CHUNK)
+            .map(|chunk| chunk.iter().map(line_energy).sum::<f64>())
+            .collect::<Vec<f64>>()
             .into_iter()
             .sum()
     }
@@ -416,7 +404,7 @@ impl ImageTerm for LineTerm<'_> {
             }
             part
         };
-        let parts: Vec<NormalEquations> = per_chunk(self.lines, partial);
+        let parts: Vec<NormalEquations> = self.lines.par_chunks(LINE_CHUNK).map(partial).collect();
         for part in parts {
             eq.h += part.h;
             eq.b += part.b;
