@@ -131,11 +131,16 @@ def make_scene(spec, work, frames=FRAMES):
     return out
 
 
-def camera_errors(out, scene):
+def frame_pairs(out, scene):
+    """Each fitted frame of `out` beside the scene's truth for the same frame number."""
+    gt = {f["frame"]: f for f in json.load(open(os.path.join(scene, "gt", "trajectory.json")))["frames"]}
     est = json.load(open(os.path.join(out, "trajectory.json")))["frames"]
-    gt = json.load(open(os.path.join(scene, "gt", "trajectory.json")))["frames"]
+    return [(e, gt[e["frame"]]) for e in est if e["frame"] in gt]
+
+
+def camera_errors(pairs):
     fx, pp, k1 = [], [], []
-    for a, b in zip(est, gt):
+    for a, b in pairs:
         for x, y in zip(a["cameras"], b["cameras"]):
             fx.append(abs(x["fx"] / y["fx"] - 1) * 100)
             pp.append(max(abs(x["cx"] - y["cx"]), abs(x["cy"] - y["cy"])))
@@ -183,17 +188,14 @@ def hidden_mm(m):
     return (statistics.mean(vals) if vals else None, max(mx) if mx else None)
 
 
-def hidden_parts(out, scene, hidden):
+def hidden_parts(pairs, hidden):
     """Where the hidden structures' centroid error comes from, mean over fitted frames (mm):
     the visible kidney's own centroid error along camera 0's axis (signed: + too deep) and
     across it, and what is left once the kidney's error is taken out (the hidden structure
     misplaced inside the kidney: shape and rotation)."""
-    est = {f["frame"]: f for f in json.load(open(os.path.join(out, "trajectory.json")))["frames"]}
-    gt = {f["frame"]: f for f in json.load(open(os.path.join(scene, "gt", "trajectory.json")))["frames"]}
     depth, across, relative = [], [], []
-    for frame, g in gt.items():
-        e = est.get(frame)
-        if not e or e.get("lost") or "kidney" not in e["centroids"] or "kidney" not in g["centroids"]:
+    for e, g in pairs:
+        if e.get("lost") or "kidney" not in e["centroids"] or "kidney" not in g["centroids"]:
             continue
         k = [a - b for a, b in zip(e["centroids"]["kidney"], g["centroids"]["kidney"])]
         for h in hidden:
@@ -222,13 +224,14 @@ def table(name, specs, work):
         (o_ls, m_ls, d_ls, _), (o_lsc, m_lsc, d_lsc, _) = res["LS"], res["LSC"]
         h_ls, hmax_ls = hidden_mm(m_ls)
         h_lsc, hmax_lsc = hidden_mm(m_lsc)
-        fx, fxmax, pp, ppmax, k1 = camera_errors(o_lsc, scene)
+        pairs = frame_pairs(o_lsc, scene)
+        fx, fxmax, pp, ppmax, k1 = camera_errors(pairs)
         ms_ls = m_ls["timing"]["ms_per_frame"]["median"]
         ms_lsc = m_lsc["timing"]["ms_per_frame"]["median"]
         hid = "–" if h_ls is None else f"{h_ls:.2f} / {h_lsc:.2f} ({hmax_lsc:.2f})"
         ni = res["noinit"]
         hidden = [k for k, v in (m_lsc.get("hidden") or {}).items() if isinstance(v, dict)]
-        parts = hidden_parts(o_lsc, scene, hidden)
+        parts = hidden_parts(pairs, hidden)
         split = "–" if parts is None else f"{parts[0]:+.2f} / {parts[1]:.2f} / {parts[2]:.2f}"
         if parts is not None:
             for key, v in zip(["depth", "across", "relative"], parts):
