@@ -84,8 +84,9 @@ TUNING = [
     (1310, 480, 270, 0.10, 2, None, True),
     (1311, 960, 540, 0.10, 2, None, True),
     (1312, 480, 270, 0.03, 4, "case_00090", False),
-]
-TEST = [
+    # The fourth test set: reported twice on 2026-12-04 (before and after the stereo weight
+    # 64), so it joined the tuning set; 1501-1512 were fixed on 2026-12-04 (fifth session)
+    # before anything of that session was measured.
     (1401, 960, 540, 0.05, 2, None, True),
     (1402, 960, 540, 0.10, 2, None, False),
     (1403, 960, 540, 0.03, 2, "case_00117", True),
@@ -98,6 +99,20 @@ TEST = [
     (1410, 480, 270, 0.10, 2, "case_00174", True),
     (1411, 960, 540, 0.08, 2, None, True),
     (1412, 480, 270, 0.03, 4, None, True),
+]
+TEST = [
+    (1501, 960, 540, 0.03, 2, None, True),
+    (1502, 960, 540, 0.08, 2, None, True),
+    (1503, 960, 540, 0.05, 2, "case_00125", False),
+    (1504, 480, 270, 0.10, 2, None, True),
+    (1505, 480, 270, 0.05, 2, None, False),
+    (1506, 480, 270, 0.03, 2, "case_00145", True),
+    (1507, 480, 270, 0.08, 2, "case_00166", True),
+    (1508, 480, 270, 0.05, 4, None, True),
+    (1509, 960, 540, 0.02, 2, None, True),
+    (1510, 480, 270, 0.10, 2, None, True),
+    (1511, 960, 540, 0.10, 2, None, False),
+    (1512, 480, 270, 0.03, 4, "case_00201", True),
 ]
 FRAMES = 40
 
