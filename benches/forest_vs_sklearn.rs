@@ -7,6 +7,10 @@
 //! Trains on the seed strokes of frames 0–2 of a 960×540 stereo phantom (tools, noise 0.03),
 //! tests on every pixel of frames 5 and 9 in both views against ground truth. The Python half
 //! (`benches/sklearn_forest.py`) pip-installs scikit-learn if it is missing. Not part of CI.
+//!
+//! Accuracy is also compared over `FOREST_SEEDS` (5 unless given) forests per side, one per
+//! random seed: a single forest's accuracy moves with its seed by about as much as the two
+//! forests differ, so one pair of forests cannot say which is ahead.
 
 use endofuse::appearance::forest::argmax;
 use endofuse::appearance::{
@@ -118,12 +122,33 @@ fn main() {
         .count();
     let ours_acc = correct as f64 / test.len() as f64;
     let ours_rate = test.len() as f64 / ours_predict_s;
+    let seeds: usize = std::env::var("FOREST_SEEDS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(5);
+    let accuracy_of = |f: &Forest| {
+        let probs = pool.install(|| f.predict_many(&test.features));
+        (0..test.len())
+            .filter(|&i| argmax(&probs[i * k..(i + 1) * k]) == test.classes[i] as usize)
+            .count() as f64
+            / test.len() as f64
+    };
+    let mut ours_seed_acc = vec![ours_acc];
+    for i in 1..seeds as u64 {
+        let p = ForestParams {
+            seed: params.seed.wrapping_add(i),
+            ..params.clone()
+        };
+        let (f, _) = pool.install(|| Forest::train(&train, classes.len(), &p).unwrap());
+        ours_seed_acc.push(accuracy_of(&f));
+    }
 
     eprintln!("running scikit-learn on the same data…");
     let py = std::process::Command::new("python3")
         .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("benches/sklearn_forest.py"))
         .arg(&dir)
         .arg(threads.to_string())
+        .arg(seeds.to_string())
         .output();
     let sk: Option<serde_json::Value> = match py {
         Ok(out) if out.status.success() => String::from_utf8_lossy(&out.stdout)
@@ -203,6 +228,24 @@ fn main() {
             tr / ours_train_s,
             ours_rate / rate,
             ours_acc - acc
+        );
+        let sk_seed_acc: Vec<f64> = sk["seed_accuracies"]
+            .as_array()
+            .map(|a| a.iter().filter_map(|v| v.as_f64()).collect())
+            .unwrap_or_default();
+        let summary = |a: &[f64]| {
+            let mean = a.iter().sum::<f64>() / a.len().max(1) as f64;
+            let lo = a.iter().copied().fold(f64::INFINITY, f64::min);
+            let hi = a.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            (mean, lo, hi)
+        };
+        let (om, olo, ohi) = summary(&ours_seed_acc);
+        let (sm, slo, shi) = summary(&sk_seed_acc);
+        println!(
+            "accuracy over {} forest seeds each: endofuse {om:.4} ({olo:.4}–{ohi:.4}), \
+             scikit-learn {sm:.4} ({slo:.4}–{shi:.4}), difference of the means {:+.5}",
+            ours_seed_acc.len().min(sk_seed_acc.len().max(1)),
+            om - sm
         );
     }
 }
