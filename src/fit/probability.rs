@@ -136,6 +136,16 @@ impl ViewProbabilities {
         }
     }
 
+    /// The same probabilities with the frame they belong to, so that what reads the image
+    /// (the stereo term, highlight checks) still can: the experiments that give the fit true
+    /// probabilities keep the rest of the frame's evidence.
+    pub fn with_frame(mut self, frame: Arc<RgbImage>) -> Self {
+        if let Some(first) = self.levels.first_mut() {
+            first.image = Some(frame);
+        }
+        self
+    }
+
     /// The frame at a pyramid level, when the probabilities come from one (not from labels).
     pub fn level_image(&mut self, level: usize) -> Option<Arc<RgbImage>> {
         self.levels.first()?.image.as_ref()?;

@@ -169,6 +169,34 @@ fn mask_occluders(
     }
 }
 
+/// An experiment, not a mode: with `ENDOFUSE_TRUTH_PROBABILITIES=C` (0.5 < C ≤ 1) set, a scene
+/// with ground-truth labels is tracked on probabilities made from them (C for the true class)
+/// instead of the forest's, so that what the appearance costs the fit (a biased depth, a
+/// misplaced hidden tumour) can be told apart from what the geometry does. Frames without
+/// ground truth, and every run without the variable, use the forest.
+fn truth_probabilities(
+    scene: &Scene,
+    camera: usize,
+    frame: usize,
+    class_labels: &[u8],
+    levels: usize,
+) -> Option<ViewProbabilities> {
+    static CONFIDENCE: std::sync::OnceLock<Option<f32>> = std::sync::OnceLock::new();
+    let confidence = (*CONFIDENCE.get_or_init(|| {
+        std::env::var("ENDOFUSE_TRUTH_PROBABILITIES")
+            .ok()
+            .and_then(|v| v.parse::<f32>().ok())
+            .filter(|c| *c > 0.5 && *c <= 1.0)
+    }))?;
+    let labels = scene.ground_truth_labels(camera, frame)?.ok()?;
+    Some(ViewProbabilities::from_labels(
+        &labels,
+        class_labels,
+        levels,
+        confidence,
+    ))
+}
+
 /// The cameras with the intrinsics of a state.
 pub fn cameras_of(scene: &Scene, state: &FitState) -> Vec<Camera> {
     scene
@@ -588,7 +616,13 @@ pub fn track(
             super::profile::time(super::profile::Phase::Pyramid, || {
                 frames
                     .into_iter()
-                    .map(|f| ViewProbabilities::new(f, levels, classes.len()))
+                    .enumerate()
+                    .map(
+                        |(c, f)| match truth_probabilities(scene, c, t, &classes.labels, levels) {
+                            Some(view) => view.with_frame(f),
+                            None => ViewProbabilities::new(f, levels, classes.len()),
+                        },
+                    )
                     .collect()
             });
         let Outcome {
