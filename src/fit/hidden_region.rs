@@ -528,7 +528,10 @@ mod tests {
         };
         let lines = ctx.build_lines(&state, &mut views, Some(&appearance), &ep);
         assert!(lines.len() > 40);
-        let config = crate::fit::FitConfig::default();
+        // Size held apart from shear (a strain prior of two weights), so that both parts of it
+        // are checked.
+        let mut config = crate::fit::FitConfig::default();
+        config.priors.strain_scale = 0.25;
         let params = config.resolve(
             crate::fit::Mode::LS,
             crate::fit::Phase::Tracked,
@@ -563,9 +566,14 @@ mod tests {
         };
         let affine = per_block(Block::Affine);
         let lambda = params.priors.strain * (0..9).map(|k| affine[(k, k)]).sum::<f64>() / 9.0;
+        let strain = crate::fit::priors::strain_curvature(
+            lambda,
+            params.priors.strain_scale * lambda,
+            &crate::fit::priors::StrainPrior::rotation(&state),
+        );
         for r in 0..12 {
             for q in 0..12 {
-                let prior = if r == q && r < 9 { lambda } else { 0.0 };
+                let prior = if r < 9 && q < 9 { strain[r][q] } else { 0.0 };
                 let want = affine[(r, q)] + prior;
                 assert!(
                     (info.h[(r, q)] - want).abs() <= 1e-9 * (1.0 + want.abs()),

@@ -186,8 +186,15 @@ pub fn joint_information(
     // curvature, the shape's Mahalanobis prior absolute.
     if pose == Block::Affine {
         let lambda = params.priors.strain * (0..9).map(|k| h[(k, k)]).sum::<f64>() / 9.0;
-        for k in 0..9 {
-            h[(k, k)] += lambda;
+        let curvature = super::priors::strain_curvature(
+            lambda,
+            params.priors.strain_scale * lambda,
+            &super::priors::StrainPrior::rotation(state),
+        );
+        for (r, row) in curvature.iter().enumerate() {
+            for (q, c) in row.iter().enumerate() {
+                h[(r, q)] += c;
+            }
         }
     }
     let offset = info.pose_columns();

@@ -231,7 +231,7 @@ fn add_priors<'a>(
             let Some(damping) = pose(eq) else {
                 return BlockPriors::None;
             };
-            let strain = StrainPrior::new(params.priors.strain, &eq.h);
+            let strain = StrainPrior::new(params.priors.strain, params.priors.strain_scale, &eq.h);
             strain.add_normal_equations(state, eq);
             BlockPriors::Affine(damping, strain)
         }

@@ -115,40 +115,79 @@ impl Prior for PoseDamping {
 
 /// The strain prior of the affine block: silhouettes barely see stretch along the optical axis
 /// against depth, so the linear part is pulled towards its nearest rotation (CT is metric);
-/// real tissue stretch survives where the data insist. Energy 0.5 λ ‖A − polar(A)‖²_F, whose
-/// gradient in A is exactly λ (A − polar(A)).
+/// real tissue stretch survives where the data insist. The pull splits in two orthogonal
+/// parts: towards the nearest similarity s·R (shear and uneven stretch, weight λ) and of its
+/// scale s towards 1 (weight λ_s), energy 0.5 λ ‖A − s R‖²_F + 0.5 λ_s · 3 (s − 1)², whose
+/// gradient in A is exactly λ (A − s R) + λ_s (s − 1) R (R is A's polar rotation and s =
+/// tr(RᵀA) / 3 its best scale; both minimise, so their own derivatives drop out). With
+/// λ_s = λ this is 0.5 λ ‖A − R‖²_F. A tissue's own deformation often changes its size a
+/// little; held at λ, that change shows as depth instead (measured with true probabilities,
+/// `ENDOFUSE_TRUTH_PROBABILITIES`: the default phantom seed 303 +1.2 mm deep, +0.0 mm with its
+/// deformation switched off), and where stereo sees depth, a looser scale lets it be the size.
 pub struct StrainPrior {
     lambda: f64,
+    lambda_scale: f64,
+}
+
+/// The curvature the strain prior adds over q1…q9 at polar rotation `rotation` (row-major):
+/// λ on every direction but uniform scale, λ_s on that one (R / √3).
+pub fn strain_curvature(lambda: f64, lambda_scale: f64, rotation: &[f64; 9]) -> [[f64; 9]; 9] {
+    std::array::from_fn(|r| {
+        std::array::from_fn(|q| {
+            let identity = if r == q { lambda } else { 0.0 };
+            identity + (lambda_scale - lambda) * rotation[r] * rotation[q] / 3.0
+        })
+    })
 }
 
 impl StrainPrior {
-    /// `weight` times the mean curvature of `h` over the linear part (q1…q9).
-    pub fn new(weight: f64, h: &DMatrix<f64>) -> Self {
+    /// `weight` times the mean curvature of `h` over the linear part (q1…q9), and
+    /// `scale_weight` times that for the uniform scale.
+    pub fn new(weight: f64, scale_weight: f64, h: &DMatrix<f64>) -> Self {
+        let lambda = weight * (0..9).map(|k| h[(k, k)]).sum::<f64>() / 9.0;
         Self {
-            lambda: weight * (0..9).map(|k| h[(k, k)]).sum::<f64>() / 9.0,
+            lambda,
+            lambda_scale: scale_weight * lambda,
         }
     }
 
-    /// q1…q9 minus those of the nearest rotation (None for a degenerate linear part).
-    fn strain(state: &FitState) -> Option<[f64; 9]> {
+    /// The polar rotation R of the linear part (q1…q9), A − s R and s − 1 (None for a
+    /// degenerate linear part).
+    fn parts(state: &FitState) -> Option<([f64; 9], [f64; 9], f64)> {
         let rotation = nearest_rotation(state.affine.linear())?;
-        let target = Affine::from_linear_translation(rotation, DVec3::ZERO);
-        Some(std::array::from_fn(|k| state.affine.q[k] - target.q[k]))
+        let r = Affine::from_linear_translation(rotation, DVec3::ZERO).q;
+        let q = &state.affine.q;
+        let scale = (0..9).map(|k| r[k] * q[k]).sum::<f64>() / 3.0;
+        Some((
+            std::array::from_fn(|k| r[k]),
+            std::array::from_fn(|k| q[k] - scale * r[k]),
+            scale - 1.0,
+        ))
+    }
+
+    /// The polar rotation of `state`'s linear part, row-major (identity when degenerate).
+    pub fn rotation(state: &FitState) -> [f64; 9] {
+        Self::parts(state).map_or([1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0], |p| p.0)
     }
 }
 
 impl Prior for StrainPrior {
     fn energy(&self, state: &FitState) -> f64 {
-        Self::strain(state).map_or(0.0, |s| quadratic(&[self.lambda; 9], &s))
+        Self::parts(state).map_or(0.0, |(_, strain, scale)| {
+            quadratic(&[self.lambda; 9], &strain) + 0.5 * self.lambda_scale * 3.0 * scale * scale
+        })
     }
 
     fn add_normal_equations(&self, state: &FitState, eq: &mut NormalEquations) {
-        let Some(strain) = Self::strain(state) else {
+        let Some((rotation, strain, scale)) = Self::parts(state) else {
             return;
         };
-        for (k, s) in strain.iter().enumerate() {
-            eq.h[(k, k)] += self.lambda;
-            eq.b[k] -= self.lambda * s;
+        let curvature = strain_curvature(self.lambda, self.lambda_scale, &rotation);
+        for k in 0..9 {
+            eq.b[k] -= self.lambda * strain[k] + self.lambda_scale * scale * rotation[k];
+            for j in 0..9 {
+                eq.h[(k, j)] += curvature[k][j];
+            }
         }
     }
 }
@@ -330,7 +369,27 @@ mod tests {
         let centre = DVec3::new(1.0, 2.0, -3.0);
         let affine = PoseDamping::new(Block::Affine, &previous, centre, 0.7, &h).unwrap();
         check(&affine, &state, Block::Affine, 12, 1e-6);
-        check(&StrainPrior::new(1.3, &h), &state, Block::Affine, 12, 1e-5);
+        check(
+            &StrainPrior::new(1.3, 1.0, &h),
+            &state,
+            Block::Affine,
+            12,
+            1e-5,
+        );
+        check(
+            &StrainPrior::new(1.3, 0.1, &h),
+            &state,
+            Block::Affine,
+            12,
+            1e-5,
+        );
+        check(
+            &StrainPrior::new(1.3, 4.0, &h),
+            &state,
+            Block::Affine,
+            12,
+            1e-5,
+        );
         let sigma = [2.0, 1.0, 0.5];
         let shape = ShapePrior::new(2.0, &sigma, &previous, 0.5, &h);
         check(&shape, &state, Block::Shape, 3, 1e-6);

@@ -109,6 +109,10 @@ pub struct PriorConfig {
     pub pose_damping: f64,
     /// Weight pulling the affine's linear part towards a rotation.
     pub strain: f64,
+    /// The weight on the linear part's uniform scale, relative to `strain` (`fit::priors`'s
+    /// strain prior: 1 holds size as firmly as shear, lower lets a tissue's own change of size
+    /// be size rather than depth where stereo sees depth).
+    pub strain_scale: f64,
     /// Prior weight on the shape weights, per σ² (absolute: energy units per (w/σ)²), for the
     /// first frame. Firm (issue 14): silhouettes see the hidden structures only through the
     /// modes' correlations, and where the organ deforms beyond the catalog the modes fitted
@@ -140,6 +144,7 @@ impl Default for PriorConfig {
         Self {
             pose_damping: 1.0,
             strain: 1.0,
+            strain_scale: 1.0,
             shape: 128.0,
             shape_damping: 0.0,
             camera_damping: 1.0,

@@ -107,6 +107,7 @@ impl FitConfig {
         for (field, v) in [
             ("priors.pose_damping", p.pose_damping),
             ("priors.strain", p.strain),
+            ("priors.strain_scale", p.strain_scale),
             ("priors.shape", p.shape),
             ("priors.shape_damping", p.shape_damping),
             ("priors.camera_damping", p.camera_damping),
