@@ -111,7 +111,8 @@ pub struct PriorConfig {
     pub strain: f64,
     /// The weight on the linear part's uniform scale, relative to `strain` (`fit::priors`'s
     /// strain prior: 1 holds size as firmly as shear, lower lets a tissue's own change of size
-    /// be size rather than depth where stereo sees depth).
+    /// be size rather than depth where stereo sees depth). 0.1 was measured on the tuning
+    /// scenes and not taken (the strain prior's notes).
     pub strain_scale: f64,
     /// Prior weight on the shape weights, per σ² (absolute: energy units per (w/σ)²), for the
     /// first frame. Firm (issue 14): silhouettes see the hidden structures only through the
