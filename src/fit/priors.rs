@@ -191,10 +191,10 @@ impl Prior for StrainPrior {
         };
         let curvature = strain_curvature(self.lambda, self.lambda_scale, &rotation);
         let scale_pull = (self.lambda_scale - self.lambda) * scale;
-        for k in 0..9 {
+        for (k, row) in curvature.iter().enumerate() {
             eq.b[k] -= self.lambda * off_rotation[k] + scale_pull * rotation[k];
-            for j in 0..9 {
-                eq.h[(k, j)] += curvature[k][j];
+            for (j, c) in row.iter().enumerate() {
+                eq.h[(k, j)] += c;
             }
         }
     }
