@@ -354,7 +354,7 @@ def calibrate_joint(rows_by_mode, config):
     if set(tracked) != {"LSC", "LS"}:
         return calibrate(rows_by_mode, config)
     best = None
-    for s in [0.25, 0.5, 1, 2, 4, 8, 16]:
+    for s in [0.25, 0.5, 1, 2, 4, 8, 16, 32, 64]:
         for e in [0.0, 0.5, 0.75, 1.0, 1.25, 1.5]:
             for k in [0.0, 1.0, 2.0, 3.0, 4.0]:
                 lsc = None
