@@ -86,10 +86,11 @@ fn the_hidden_region_is_written_and_holds_the_true_tumour() {
         inside >= 10,
         "the true centroid inside the 95 % sphere in {inside} of 12 frames"
     );
-    // At 320×180 the lines see the kidney at 160 px wide: 9.1 mm here (4.8 mm median at
-    // 480×270-960×540 in benches/hidden_region_coverage.py). Bounded, not a sphere that holds
-    // everything.
-    assert!(median <= 10.0, "median 95 % radius {median} mm");
+    // At 320×180 the lines see the kidney at 160 px wide, and the fit's own information (scaled
+    // by 16 since the calibration of 2026-12-04) dominates: 11.1 mm here (9.1 mm with the
+    // constants before; 4.9 mm median at 480×270-960×540 in
+    // benches/hidden_region_coverage.py). Bounded, not a sphere that holds everything.
+    assert!(median <= 12.0, "median 95 % radius {median} mm");
     // metrics.json says the same.
     let m = json(&out.join("metrics.json"));
     let h = &m["hidden"]["tumour_endo"];
