@@ -68,7 +68,14 @@ fn a_session_killed_while_saving_is_whole_and_never_older_than_the_last_save() {
     let mut state: u64 = 0x2545_f491_4f6c_dd1d;
     let mut kills_inside_a_write = 0;
     let mut ever_saved = false;
-    for round in 0..30 {
+    // At least 30 rounds, and more (up to 120) until three kills have landed inside a write:
+    // on a loaded machine the writers start late and fewer kills find one mid-write.
+    let mut rounds = 0;
+    for round in 0..120 {
+        if round >= 30 && kills_inside_a_write >= 3 {
+            break;
+        }
+        rounds = round + 1;
         state = state
             .wrapping_mul(6364136223846793005)
             .wrapping_add(1442695040888963407);
@@ -141,7 +148,7 @@ fn a_session_killed_while_saving_is_whole_and_never_older_than_the_last_save() {
     }
     assert!(
         kills_inside_a_write >= 3,
-        "only {kills_inside_a_write} of 30 kills landed inside a write: the test shows nothing"
+        "only {kills_inside_a_write} of {rounds} kills landed inside a write: the test shows nothing"
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
