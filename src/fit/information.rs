@@ -185,17 +185,8 @@ pub fn joint_information(
     // The fit's priors, as its steps add them: the strain prior relative to the affine's own
     // curvature, the shape's Mahalanobis prior absolute.
     if pose == Block::Affine {
-        let lambda = params.priors.strain * (0..9).map(|k| h[(k, k)]).sum::<f64>() / 9.0;
-        let curvature = super::priors::strain_curvature(
-            lambda,
-            params.priors.strain_scale * lambda,
-            &super::priors::StrainPrior::rotation(state),
-        );
-        for (r, row) in curvature.iter().enumerate() {
-            for (q, c) in row.iter().enumerate() {
-                h[(r, q)] += c;
-            }
-        }
+        super::priors::StrainPrior::new(params.priors.strain, params.priors.strain_scale, &h)
+            .add_curvature(state, &mut h);
     }
     let offset = info.pose_columns();
     for (k, sigma) in model

@@ -133,22 +133,11 @@ pub struct StrainPrior {
     lambda_scale: f64,
 }
 
-/// The curvature the strain prior adds over q1…q9 at polar rotation `rotation` (row-major):
-/// λ on every direction but uniform scale, λ_s on that one (R / √3).
-pub fn strain_curvature(lambda: f64, lambda_scale: f64, rotation: &[f64; 9]) -> [[f64; 9]; 9] {
-    std::array::from_fn(|r| {
-        std::array::from_fn(|q| {
-            let identity = if r == q { lambda } else { 0.0 };
-            identity + (lambda_scale - lambda) * rotation[r] * rotation[q] / 3.0
-        })
-    })
-}
-
 impl StrainPrior {
     /// `weight` times the mean curvature of `h` over the linear part (q1…q9), and
     /// `scale_weight` times that for the uniform scale.
     pub fn new(weight: f64, scale_weight: f64, h: &DMatrix<f64>) -> Self {
-        let lambda = weight * (0..9).map(|k| h[(k, k)]).sum::<f64>() / 9.0;
+        let lambda = weight * mean_diagonal(h, 0..9);
         Self {
             lambda,
             lambda_scale: scale_weight * lambda,
@@ -171,9 +160,24 @@ impl StrainPrior {
         ))
     }
 
-    /// The polar rotation of `state`'s linear part, row-major (identity when degenerate).
-    pub fn rotation(state: &FitState) -> [f64; 9] {
-        Self::parts(state).map_or([1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0], |p| p.0)
+    /// Adds the prior's curvature over q1…q9 at polar rotation `rotation` (row-major) to the
+    /// top-left of `h`: λ on every direction but uniform scale, λ_s on that one (R / √3).
+    fn add_curvature_at(&self, rotation: &[f64; 9], h: &mut DMatrix<f64>) {
+        for r in 0..9 {
+            for q in 0..9 {
+                let identity = if r == q { self.lambda } else { 0.0 };
+                h[(r, q)] +=
+                    identity + (self.lambda_scale - self.lambda) * rotation[r] * rotation[q] / 3.0;
+            }
+        }
+    }
+
+    /// The curvature its steps add at `state`, for the joint information (the identity's
+    /// rotation where the linear part is degenerate).
+    pub fn add_curvature(&self, state: &FitState, h: &mut DMatrix<f64>) {
+        let rotation =
+            Self::parts(state).map_or([1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0], |p| p.0);
+        self.add_curvature_at(&rotation, h);
     }
 }
 
@@ -189,13 +193,10 @@ impl Prior for StrainPrior {
         let Some((rotation, off_rotation, scale)) = Self::parts(state) else {
             return;
         };
-        let curvature = strain_curvature(self.lambda, self.lambda_scale, &rotation);
+        self.add_curvature_at(&rotation, &mut eq.h);
         let scale_pull = (self.lambda_scale - self.lambda) * scale;
-        for (k, row) in curvature.iter().enumerate() {
+        for k in 0..9 {
             eq.b[k] -= self.lambda * off_rotation[k] + scale_pull * rotation[k];
-            for (j, c) in row.iter().enumerate() {
-                eq.h[(k, j)] += c;
-            }
         }
     }
 }
