@@ -117,22 +117,19 @@ fn main() {
         ours_predict_s = ours_predict_s.min(s.elapsed().as_secs_f64());
     }
     let k = classes.len();
-    let correct = (0..test.len())
-        .filter(|&i| argmax(&probs[i * k..(i + 1) * k]) == test.classes[i] as usize)
-        .count();
-    let ours_acc = correct as f64 / test.len() as f64;
-    let ours_rate = test.len() as f64 / ours_predict_s;
-    let seeds: usize = std::env::var("FOREST_SEEDS")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(5);
-    let accuracy_of = |f: &Forest| {
-        let probs = pool.install(|| f.predict_many(&test.features));
+    // Share of test pixels whose most probable class is the true one.
+    let accuracy = |probs: &[f32]| {
         (0..test.len())
             .filter(|&i| argmax(&probs[i * k..(i + 1) * k]) == test.classes[i] as usize)
             .count() as f64
             / test.len() as f64
     };
+    let ours_acc = accuracy(&probs);
+    let ours_rate = test.len() as f64 / ours_predict_s;
+    let seeds: usize = std::env::var("FOREST_SEEDS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(5);
     let mut ours_seed_acc = vec![ours_acc];
     for i in 1..seeds as u64 {
         let p = ForestParams {
@@ -140,7 +137,7 @@ fn main() {
             ..params.clone()
         };
         let (f, _) = pool.install(|| Forest::train(&train, classes.len(), &p).unwrap());
-        ours_seed_acc.push(accuracy_of(&f));
+        ours_seed_acc.push(accuracy(&pool.install(|| f.predict_many(&test.features))));
     }
 
     eprintln!("running scikit-learn on the same data…");
