@@ -293,6 +293,18 @@ def smallest(rows, grid, base):
     return best
 
 
+def with_lost_growth(base, rows_by_mode):
+    """`base` with the smallest lost-frame growth g on its grid that holds 95 % of the lost
+    frames of every mode; returns the constants, each mode's coverage and median radius with
+    them, and the number of lost frames."""
+    lost = [r for rows in rows_by_mode.values() for r in rows if r["lost"]]
+    for g in [0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0]:
+        base = dict(base, g=g)
+        if lost and coverage(lost, base)[0] >= 0.95:
+            break
+    return base, {m: coverage(rows, base) for m, rows in rows_by_mode.items()}, len(lost)
+
+
 def calibrate(rows_by_mode, config):
     """LSC: s, e, k, d_c on its tracked frames; LS: d_u and u with those kept; then g on the
     lost frames of both. Returns the constants and what they give per mode."""
@@ -317,12 +329,7 @@ def calibrate(rows_by_mode, config):
         if found is None:
             return None
         base = found[0]
-    lost = [r for rows in rows_by_mode.values() for r in rows if r["lost"]]
-    for g in [0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0]:
-        base = dict(base, g=g)
-        if lost and coverage(lost, base)[0] >= 0.95:
-            break
-    return base, {m: coverage(rows, base) for m, rows in rows_by_mode.items()}, len(lost)
+    return with_lost_growth(base, rows_by_mode)
 
 
 def calibrate_joint(rows_by_mode, config):
@@ -384,13 +391,7 @@ def calibrate_joint(rows_by_mode, config):
                                     "u": ls[1], "g": config.get("lost_growth_mm_per_frame", 0.0)})
     if best is None:
         return None
-    base = best[1]
-    lost = [r for rows in rows_by_mode.values() for r in rows if r["lost"]]
-    for g in [0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0]:
-        base = dict(base, g=g)
-        if lost and coverage(lost, base)[0] >= 0.95:
-            break
-    return base, {m: coverage(rows, base) for m, rows in rows_by_mode.items()}, len(lost)
+    return with_lost_growth(best[1], rows_by_mode)
 
 
 def main():
