@@ -114,7 +114,19 @@ fn base_channels_many(rgb: &[u8], out: &mut [[u8; CHANNELS]]) {
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 unsafe fn base_channels_many_avx2(rgb: &[u8], out: &mut [[u8; CHANNELS]]) {
-    base_channels_many_portable(rgb, out);
+    use super::lab_avx2;
+    let (lut, recip) = (linear_lut(), reciprocals());
+    let n = out.len().min(rgb.len() / 3);
+    let whole = n / lab_avx2::LANES * lab_avx2::LANES;
+    for (o, p) in out[..whole]
+        .chunks_exact_mut(lab_avx2::LANES)
+        .zip(rgb.chunks_exact(3 * lab_avx2::LANES))
+    {
+        o.copy_from_slice(&lab_avx2::base_channels_lanes(p, lut, recip));
+    }
+    for i in whole..n {
+        out[i] = base_channels(rgb[3 * i], rgb[3 * i + 1], rgb[3 * i + 2]);
+    }
 }
 
 #[inline(always)]
@@ -218,6 +230,27 @@ pub fn reach_for_level(level: usize) -> usize {
 /// entry before reading it.
 static TABLES_SUMS: crate::pool::Pool<[u32; CHANNELS]> = crate::pool::Pool::new();
 static TABLES_SQUARES: crate::pool::Pool<[u32; BANK_CHANNELS]> = crate::pool::Pool::new();
+/// Recycled per-pixel channels of a region (every entry is written before it is read).
+static BASES: crate::pool::Pool<[u8; CHANNELS]> = crate::pool::Pool::new();
+
+/// The per-pixel channels of the `size` pixels at `offset` in `frame`, row-major, converted
+/// straight from the frame's rows. The caller keeps the region inside the frame.
+fn base_of_region(
+    frame: &RgbImage,
+    (x0, y0): (usize, usize),
+    (w, h): (usize, usize),
+) -> Vec<[u8; CHANNELS]> {
+    let (raw, fw) = (frame.as_raw(), frame.width() as usize);
+    let mut out = BASES.take(w * h, [0u8; CHANNELS]);
+    out.par_chunks_mut(w.max(1))
+        .enumerate()
+        .with_min_len(16)
+        .for_each(|(y, row)| {
+            let start = ((y0 + y) * fw + x0) * 3;
+            base_channels_many(&raw[start..start + 3 * row.len()], row);
+        });
+    out
+}
 
 /// A (`rows` × `stride`) summed-area table from `pool`, first row and column zero.
 fn table<T: Copy + Default>(pool: &crate::pool::Pool<T>, stride: usize, rows: usize) -> Vec<T> {
@@ -265,6 +298,7 @@ impl Drop for FrameFeatures {
     fn drop(&mut self) {
         TABLES_SUMS.give([std::mem::take(&mut self.integrals)]);
         TABLES_SQUARES.give([std::mem::take(&mut self.squares)]);
+        BASES.give([std::mem::take(&mut self.base)]);
     }
 }
 
@@ -277,7 +311,7 @@ impl FrameFeatures {
     /// Features of `frame`, pyramid level `level` of its source (windows scaled to match).
     pub fn at_level(frame: &RgbImage, level: usize) -> Self {
         let full = (frame.width() as usize, frame.height() as usize);
-        Self::build(frame, level, full, (0, 0))
+        Self::build(frame, level, full, (0, 0), full)
     }
 
     /// Features of the pixels inside `(x0, y0, w, h)` of `frame` (pyramid level `level`)
@@ -297,9 +331,7 @@ impl FrameFeatures {
             y0.min(full.1.saturating_sub(1)),
         );
         let (w, h) = (w.clamp(1, full.0 - x0), h.clamp(1, full.1 - y0));
-        let crop =
-            image::imageops::crop_imm(frame, x0 as u32, y0 as u32, w as u32, h as u32).to_image();
-        Self::build(&crop, level, full, (x0, y0))
+        Self::build(frame, level, full, (x0, y0), (w, h))
     }
 
     /// Largest distance (px) any feature reaches.
@@ -320,9 +352,17 @@ impl FrameFeatures {
         axis(x, ox, self.width, self.full.0) && axis(y, oy, self.height, self.full.1)
     }
 
-    fn build(frame: &RgbImage, level: usize, full: (usize, usize), offset: (usize, usize)) -> Self {
-        let (w, h) = (frame.width() as usize, frame.height() as usize);
-        let base = base_of(frame);
+    /// The features of the `size` pixels at `offset` in `frame` (read in place: a region is
+    /// not copied out first).
+    fn build(
+        frame: &RgbImage,
+        level: usize,
+        full: (usize, usize),
+        offset: (usize, usize),
+        size: (usize, usize),
+    ) -> Self {
+        let (w, h) = size;
+        let base = base_of_region(frame, offset, size);
         // The channels' table and their squares' table, filled in parallel.
         let (sums, squares) = rayon::join(
             || summed_area(&TABLES_SUMS, &base, w, h, |px, c| px[c] as u32),
@@ -348,11 +388,12 @@ impl FrameFeatures {
         self.height
     }
 
-    /// Every channel's mean over the window of radius `r` around (x, y), clipped to the image.
+    /// The bank channels' means over the window of radius `r` around (x, y), clipped to the
+    /// image (a gradient needs no other channel).
     #[inline]
-    fn means(&self, x: usize, y: usize, r: usize) -> ([f32; CHANNELS], u32) {
+    fn bank_means(&self, x: usize, y: usize, r: usize) -> [f32; BANK_CHANNELS] {
         let (sums, area) = box_sums(&self.integrals, self.width, self.height, x, y, r);
-        (sums.map(|s| mean(s, area)), area)
+        std::array::from_fn(|c| mean(sums[c], area))
     }
 
     /// The feature vector of pixel (x, y).
@@ -363,15 +404,21 @@ impl FrameFeatures {
         let mut std = [[0u8; BANK_CHANNELS]; SCALES];
         let mut grad = [[0u8; BANK_CHANNELS]; SCALES];
         for (i, &r) in self.radii.iter().enumerate() {
+            // Coarse levels round neighbouring radii to the same one (level 1: 1, 1, 2, 4, 6):
+            // the same windows give the same values, so they are copied, not summed again.
+            if i > 0 && r == self.radii[i - 1] {
+                (means[i], std[i], grad[i]) = (means[i - 1], std[i - 1], grad[i - 1]);
+                continue;
+            }
             let (sums, area) = box_sums(&self.integrals, w, h, x, y, r);
             means[i] = sums.map(|s| mean(s, area));
             let (sq, _) = box_sums(&self.squares, w, h, x, y, r);
             // Haar gradient at this scale: the window a radius ahead minus the one a radius
             // behind, across and down.
-            let (right, _) = self.means((x + r).min(w - 1), y, r);
-            let (left, _) = self.means(x.saturating_sub(r), y, r);
-            let (down, _) = self.means(x, (y + r).min(h - 1), r);
-            let (up, _) = self.means(x, y.saturating_sub(r), r);
+            let right = self.bank_means((x + r).min(w - 1), y, r);
+            let left = self.bank_means(x.saturating_sub(r), y, r);
+            let down = self.bank_means(x, (y + r).min(h - 1), r);
+            let up = self.bank_means(x, y.saturating_sub(r), r);
             for c in 0..BANK_CHANNELS {
                 std[i][c] = deviation(sums[c], sq[c], area);
                 grad[i][c] = gradient(right[c] - left[c], down[c] - up[c]);
@@ -811,6 +858,23 @@ mod tests {
     }
 
     /// The fast cube root equals f64's, rounded to f32, over CIELAB's whole range.
+    /// Every one of the 16.7 million sRGB colours: the dispatched conversion (AVX2 intrinsics
+    /// where the CPU has them) equals the per-pixel one (under a second).
+    #[test]
+    fn every_colour_converts_as_the_per_pixel_code_does() {
+        let rgb: Vec<u8> = (0..1u32 << 24)
+            .flat_map(|c| [(c >> 16) as u8, (c >> 8) as u8, c as u8])
+            .collect();
+        let mut got = vec![[0u8; CHANNELS]; rgb.len() / 3];
+        base_channels_many(&rgb, &mut got);
+        let differing = rgb
+            .chunks_exact(3)
+            .zip(&got)
+            .filter(|(p, g)| base_channels(p[0], p[1], p[2]) != **g)
+            .count();
+        assert_eq!(differing, 0, "colours converted differently");
+    }
+
     #[test]
     fn cube_root_is_correctly_rounded_over_labs_range() {
         let (mut t, mut checked, mut off_by_one_ulp) = (0.008_857f32, 0, 0);

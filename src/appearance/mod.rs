@@ -6,6 +6,8 @@ pub mod dense;
 pub mod features;
 pub mod forest;
 pub mod hint;
+#[cfg(target_arch = "x86_64")]
+mod lab_avx2;
 pub mod smooth;
 pub mod validate;
 
