@@ -8,6 +8,8 @@ pub mod forest;
 pub mod hint;
 #[cfg(target_arch = "x86_64")]
 mod lab_avx2;
+#[cfg(target_arch = "x86_64")]
+mod pixel_avx2;
 pub mod smooth;
 pub mod validate;
 
