@@ -489,7 +489,7 @@ impl FrameFeatures {
 
     /// Features of the listed full-frame pixels (x, y); each must lie in the region. Equal
     /// to [`FrameFeatures::at`] of each, bit for bit; in AVX2 intrinsics where the CPU has them
-    /// (`pixel_avx2`: 1.78 → 0.46 ms for 5,000 pixels on one core, `cargo bench --bench
+    /// (`pixel_avx2`: 1.78 → 1.01 ms for 5,000 pixels on one core, `cargo bench --bench
     /// features_speed`).
     pub fn pixels(&self, list: &[(u32, u32)]) -> Vec<FeatureVector> {
         #[cfg(target_arch = "x86_64")]
