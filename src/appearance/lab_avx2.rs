@@ -3,8 +3,8 @@
 //! [`super::features::base_channels`], so the result is equal bit for bit (no fused
 //! multiply–adds; f32 and f64 rounding as the scalar code rounds). The compiler's own
 //! vectorisation of the lane-wise Rust left most of this scalar, and the conversion was the
-//! largest part of preparing a region's features for the fit (1.4 of 1.7 ms for a 420×270
-//! region on one core).
+//! largest part of preparing a region's features for the fit (1.4 of the 1.9 ms a 420×270
+//! region took on one core).
 
 use super::features::{BANK_CHANNELS, CHANNELS};
 use std::arch::x86_64::*;

@@ -61,7 +61,8 @@ fn sums(ff: &FrameFeatures, x: usize, y: usize, r: usize) -> (__m256i, u32) {
     (s, area)
 }
 
-/// Every channel's window mean: the sum (exact in f32: below 2²⁴) times 1 / area.
+/// Every channel's window mean: the sum (below 2³¹, so the signed conversion reads it
+/// right, and below 2²⁴, so f32 holds it exactly) times 1 / area.
 #[target_feature(enable = "avx2")]
 #[inline]
 fn means(sums: __m256i, area: u32) -> __m256 {
