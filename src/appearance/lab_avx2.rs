@@ -83,9 +83,11 @@ fn load(v: &[f32; LANES]) -> __m256 {
     unsafe { _mm256_loadu_ps(v.as_ptr()) }
 }
 
-/// (v.clamp(0, 255) + 0.5) truncated, as `features::quantise` (v is never NaN here).
+/// (v.clamp(0, 255) + 0.5) truncated, as `features::quantise`, of 8 lanes (v is never NaN
+/// here); also `pixel_avx2`'s.
 #[target_feature(enable = "avx2")]
-fn quantise(v: __m256) -> [i32; LANES] {
+#[inline]
+pub(super) fn quantise(v: __m256) -> [i32; LANES] {
     let clamped = _mm256_min_ps(_mm256_max_ps(v, _mm256_setzero_ps()), _mm256_set1_ps(255.0));
     let q = _mm256_cvttps_epi32(_mm256_add_ps(clamped, _mm256_set1_ps(0.5)));
     let mut out = [0i32; LANES];

@@ -11,6 +11,7 @@ use super::features::{
     BANK_CHANNELS, CHANNELS, FEATURE_COUNT, FeatureVector, FrameFeatures, RECIPROCAL, SCALES,
     window,
 };
+use super::lab_avx2::quantise;
 use std::arch::x86_64::*;
 
 /// One corner of a window: the five channels' sums (lanes 0–4; lanes 5–7 zero).
@@ -48,17 +49,15 @@ fn corners(ff: &FrameFeatures, x: usize, y: usize, r: usize) -> ([usize; 4], u32
     )
 }
 
-/// Every channel's window sum (a − b − c + d, wrapping) and the window's pixel count.
+/// Every channel's sum over the window with these corners (a − b − c + d, wrapping).
 #[target_feature(enable = "avx2")]
 #[inline]
-fn sums(ff: &FrameFeatures, x: usize, y: usize, r: usize) -> (__m256i, u32) {
-    let ([a, b, c, d], area) = corners(ff, x, y, r);
+fn sums(ff: &FrameFeatures, [a, b, c, d]: [usize; 4]) -> __m256i {
     let t = &ff.integrals;
-    let s = _mm256_add_epi32(
+    _mm256_add_epi32(
         _mm256_sub_epi32(_mm256_sub_epi32(corner(t, a), corner(t, b)), corner(t, c)),
         corner(t, d),
-    );
-    (s, area)
+    )
 }
 
 /// Every channel's window mean: the sum (below 2³¹, so the signed conversion reads it
@@ -76,32 +75,8 @@ fn means(sums: __m256i, area: u32) -> __m256 {
 #[target_feature(enable = "avx2")]
 #[inline]
 fn means_at(ff: &FrameFeatures, x: usize, y: usize, r: usize) -> __m256 {
-    let (s, area) = sums(ff, x, y, r);
-    means(s, area)
-}
-
-/// `features::quantise` of 8 lanes (never NaN): clamp to 0–255, add ½, truncate.
-#[target_feature(enable = "avx2")]
-#[inline]
-fn quantise(v: __m256) -> [i32; 8] {
-    let c = _mm256_min_ps(_mm256_max_ps(v, _mm256_setzero_ps()), _mm256_set1_ps(255.0));
-    let q = _mm256_cvttps_epi32(_mm256_add_ps(c, _mm256_set1_ps(0.5)));
-    let mut out = [0i32; 8];
-    // SAFETY: `out` is 32 bytes; the store is unaligned.
-    unsafe { _mm256_storeu_si256(out.as_mut_ptr().cast(), q) };
-    out
-}
-
-/// [`quantise`] of 4 lanes.
-#[target_feature(enable = "avx2")]
-#[inline]
-fn quantise4(v: __m128) -> [i32; 4] {
-    let c = _mm_min_ps(_mm_max_ps(v, _mm_setzero_ps()), _mm_set1_ps(255.0));
-    let q = _mm_cvttps_epi32(_mm_add_ps(c, _mm_set1_ps(0.5)));
-    let mut out = [0i32; 4];
-    // SAFETY: `out` is 16 bytes; the store is unaligned.
-    unsafe { _mm_storeu_si128(out.as_mut_ptr().cast(), q) };
-    out
+    let (corners, area) = corners(ff, x, y, r);
+    means(sums(ff, corners), area)
 }
 
 /// What one scale gives: quantised means (5 channels), deviations and gradients (3 bank
@@ -110,8 +85,8 @@ fn quantise4(v: __m128) -> [i32; 4] {
 struct Scale {
     means: __m256,
     mean_q: [i32; 8],
-    deviation: [i32; 4],
-    gradient: [i32; 4],
+    deviation: [i32; 8],
+    gradient: [i32; 8],
 }
 
 /// One scale's features at (x, y), as `FrameFeatures::at` computes them.
@@ -119,10 +94,10 @@ struct Scale {
 #[inline]
 fn scale(ff: &FrameFeatures, x: usize, y: usize, r: usize) -> Scale {
     let (w, h) = (ff.width, ff.height);
-    let (s, area) = sums(ff, x, y, r);
+    let ([a, b, c, d], area) = corners(ff, x, y, r);
+    let s = sums(ff, [a, b, c, d]);
     let m = means(s, area);
     // Deviation: 3·√(n·Σv² − (Σv)²) / n, the spread in f64 as `features::deviation` does.
-    let ([a, b, c, d], _) = corners(ff, x, y, r);
     let q = &ff.squares;
     let sq = _mm_add_epi32(
         _mm_sub_epi32(
@@ -140,10 +115,11 @@ fn scale(ff: &FrameFeatures, x: usize, y: usize, r: usize) -> Scale {
         ),
         _mm256_setzero_pd(),
     );
-    let deviation = quantise4(_mm_mul_ps(
+    // Four lanes (three channels), quantised in the lower half of eight.
+    let deviation = quantise(_mm256_zextps128_ps256(_mm_mul_ps(
         _mm_mul_ps(_mm_set1_ps(3.0), _mm_sqrt_ps(_mm256_cvtpd_ps(spread))),
         _mm_set1_ps(RECIPROCAL[area as usize]),
-    ));
+    )));
     // Haar gradient: the window a radius ahead minus the one a radius behind.
     let gx = _mm256_sub_ps(
         means_at(ff, (x + r).min(w - 1), y, r),
@@ -154,12 +130,11 @@ fn scale(ff: &FrameFeatures, x: usize, y: usize, r: usize) -> Scale {
         means_at(ff, x, y.saturating_sub(r), r),
     );
     let magnitude = _mm256_sqrt_ps(_mm256_add_ps(_mm256_mul_ps(gx, gx), _mm256_mul_ps(gy, gy)));
-    let g = quantise(_mm256_mul_ps(_mm256_set1_ps(2.0), magnitude));
     Scale {
         means: m,
         mean_q: quantise(m),
         deviation,
-        gradient: [g[0], g[1], g[2], g[3]],
+        gradient: quantise(_mm256_mul_ps(_mm256_set1_ps(2.0), magnitude)),
     }
 }
 
