@@ -109,40 +109,42 @@ fn base_channels_many(rgb: &[u8], out: &mut [[u8; CHANNELS]]) {
     base_channels_many_portable(rgb, out);
 }
 
-/// Does this CPU have AVX2 (asked once)?
+/// Does this CPU have AVX2? (The standard library asks the CPU once and keeps the answer.)
 #[cfg(target_arch = "x86_64")]
 fn has_avx2() -> bool {
-    static AVX2: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
-    *AVX2.get_or_init(|| std::arch::is_x86_feature_detected!("avx2"))
+    std::arch::is_x86_feature_detected!("avx2")
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 unsafe fn base_channels_many_avx2(rgb: &[u8], out: &mut [[u8; CHANNELS]]) {
-    use super::lab_avx2;
     let (lut, recip) = (linear_lut(), reciprocals());
-    let n = out.len().min(rgb.len() / 3);
-    let whole = n / lab_avx2::LANES * lab_avx2::LANES;
-    for (o, p) in out[..whole]
-        .chunks_exact_mut(lab_avx2::LANES)
-        .zip(rgb.chunks_exact(3 * lab_avx2::LANES))
-    {
-        o.copy_from_slice(&lab_avx2::base_channels_lanes(p, lut, recip));
-    }
-    for i in whole..n {
-        out[i] = base_channels(rgb[3 * i], rgb[3 * i + 1], rgb[3 * i + 2]);
-    }
+    // The closure inherits this function's AVX2, so it may call the AVX2 lanes.
+    in_lanes(rgb, out, |p| {
+        super::lab_avx2::base_channels_lanes(p, lut, recip)
+    });
 }
 
 #[inline(always)]
 fn base_channels_many_portable(rgb: &[u8], out: &mut [[u8; CHANNELS]]) {
+    in_lanes(rgb, out, base_channels_lanes);
+}
+
+/// Converts `LANES` pixels at a time with `lanes` (given exactly `3 * LANES` bytes), the last
+/// pixels one by one with [`base_channels`].
+#[inline(always)]
+fn in_lanes(
+    rgb: &[u8],
+    out: &mut [[u8; CHANNELS]],
+    lanes: impl Fn(&[u8]) -> [[u8; CHANNELS]; LANES],
+) {
     let n = out.len().min(rgb.len() / 3);
     let whole = n / LANES * LANES;
     for (o, p) in out[..whole]
         .chunks_exact_mut(LANES)
         .zip(rgb.chunks_exact(3 * LANES))
     {
-        o.copy_from_slice(&base_channels_lanes(p));
+        o.copy_from_slice(&lanes(p));
     }
     for i in whole..n {
         out[i] = base_channels(rgb[3 * i], rgb[3 * i + 1], rgb[3 * i + 2]);
@@ -495,24 +497,29 @@ impl FrameFeatures {
     pub fn pixels(&self, list: &[(u32, u32)]) -> Vec<FeatureVector> {
         #[cfg(target_arch = "x86_64")]
         if has_avx2() {
-            return list
-                .par_iter()
-                .map(|&(x, y)| {
-                    let (lx, ly) = self.local(x, y);
-                    // SAFETY: the CPU supports AVX2 (checked just above).
-                    unsafe { super::pixel_avx2::feature_vector(self, lx, ly) }
-                })
-                .collect();
+            // SAFETY: the CPU supports AVX2 (checked just above).
+            return self.pixels_by(list, |ff, x, y| unsafe {
+                super::pixel_avx2::feature_vector(ff, x, y)
+            });
         }
         self.pixels_scalar(list)
     }
 
     /// [`FrameFeatures::pixels`] through [`FrameFeatures::at`] on any CPU.
     pub fn pixels_scalar(&self, list: &[(u32, u32)]) -> Vec<FeatureVector> {
+        self.pixels_by(list, Self::at)
+    }
+
+    /// `vector` of each listed full-frame pixel, given in the region's own coordinates.
+    fn pixels_by(
+        &self,
+        list: &[(u32, u32)],
+        vector: impl Fn(&Self, usize, usize) -> FeatureVector + Sync,
+    ) -> Vec<FeatureVector> {
         list.par_iter()
             .map(|&(x, y)| {
                 let (lx, ly) = self.local(x, y);
-                self.at(lx, ly)
+                vector(self, lx, ly)
             })
             .collect()
     }

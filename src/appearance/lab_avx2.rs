@@ -9,8 +9,8 @@
 use super::features::{BANK_CHANNELS, CHANNELS};
 use std::arch::x86_64::*;
 
-/// Pixels per call.
-pub(super) const LANES: usize = 8;
+/// Pixels per call (`features::base_channels_many`'s lanes).
+const LANES: usize = 8;
 
 /// The channels of 8 pixels; `rgb` holds exactly 24 bytes (R, G, B interleaved), `lut` is
 /// sRGB → linear light and `recip` 255·2¹⁶ / (r + g + b).
