@@ -99,8 +99,9 @@ TUNING = [
     (1410, 480, 270, 0.10, 2, "case_00174", True),
     (1411, 960, 540, 0.08, 2, None, True),
     (1412, 480, 270, 0.03, 4, None, True),
-]
-TEST = [
+    # The fifth test set: reported on 2026-12-04 and rerun (same fit) on 2026-12-05, so it
+    # joined the tuning set; 1701-1712 were fixed on 2026-12-05 (seventh session) before
+    # anything of that session was measured, with four KiTS patients not used before.
     (1501, 960, 540, 0.03, 2, None, True),
     (1502, 960, 540, 0.08, 2, None, True),
     (1503, 960, 540, 0.05, 2, "case_00125", False),
@@ -113,6 +114,20 @@ TEST = [
     (1510, 480, 270, 0.10, 2, None, True),
     (1511, 960, 540, 0.10, 2, None, False),
     (1512, 480, 270, 0.03, 4, "case_00201", True),
+]
+TEST = [
+    (1701, 960, 540, 0.05, 2, None, True),
+    (1702, 960, 540, 0.03, 2, "case_00127", True),
+    (1703, 960, 540, 0.08, 2, None, False),
+    (1704, 480, 270, 0.10, 2, None, True),
+    (1705, 480, 270, 0.03, 2, "case_00137", True),
+    (1706, 480, 270, 0.05, 2, None, True),
+    (1707, 480, 270, 0.08, 2, "case_00149", False),
+    (1708, 480, 270, 0.05, 4, None, True),
+    (1709, 960, 540, 0.02, 2, None, True),
+    (1710, 480, 270, 0.10, 2, "case_00204", True),
+    (1711, 960, 540, 0.10, 2, None, True),
+    (1712, 480, 270, 0.03, 4, None, False),
 ]
 FRAMES = 40
 
