@@ -190,6 +190,43 @@ impl Intrinsics {
         self.k1 != 0.0 || self.k2 != 0.0 || self.p1 != 0.0 || self.p2 != 0.0 || self.k3 != 0.0
     }
 
+    /// Whether a point at normalised radius² `r2` lies inside the lens model's fold: the
+    /// distorted radius r·(1 + k1 r² + k2 r⁴ + k3 r⁶) grows with r from the centre up to its
+    /// first turning point, and beyond it the polynomial folds back. With k1 and k2 both
+    /// negative (k1 −0.04, k2 −0.007, as drawn for the widened phantoms) that is r ≈ 2, 64°
+    /// off the axis: a point there would land back inside the image, and the phantom drew a
+    /// tool's far shaft as black wedges across the organ. Such points are not imaged.
+    ///
+    /// Exact: the derivative d(s) = 1 + 3k1 s + 5k2 s² + 7k3 s³ of the distorted radius (s = r²)
+    /// is positive at 0, so it stays positive on [0, r2] unless it is not at r2 or at one of its
+    /// own turning points inside (roots of 3k1 + 10k2 s + 21k3 s²).
+    fn inside_fold(&self, r2: f64) -> bool {
+        let (k1, k2, k3) = (self.k1, self.k2, self.k3);
+        // Most calls are well inside the view: a bound that needs no roots.
+        if r2 * (3.0 * k1.abs() + r2 * (5.0 * k2.abs() + r2 * 7.0 * k3.abs())) < 1.0 {
+            return true;
+        }
+        let d = |s: f64| 1.0 + s * (3.0 * k1 + s * (5.0 * k2 + s * 7.0 * k3));
+        if !(d(r2) > 0.0) {
+            return false;
+        }
+        let (a, b, c) = (21.0 * k3, 10.0 * k2, 3.0 * k1);
+        let mut turning = [f64::NAN; 2];
+        if a != 0.0 {
+            let disc = b * b - 4.0 * a * c;
+            if disc >= 0.0 {
+                let root = disc.sqrt();
+                turning = [(-b - root) / (2.0 * a), (-b + root) / (2.0 * a)];
+            }
+        } else if b != 0.0 {
+            turning[0] = -c / b;
+        }
+        turning
+            .iter()
+            .filter(|&&s| s > 0.0 && s < r2)
+            .all(|&s| d(s) > 0.0)
+    }
+
     /// d(radial factor)/d(r²) at r².
     fn radial_slope(&self, r2: f64) -> f64 {
         self.k1 + 2.0 * self.k2 * r2 + 3.0 * self.k3 * r2 * r2
@@ -217,12 +254,15 @@ impl Intrinsics {
     }
 
     /// Projects a point given in this camera's coordinates (mm) to pixels, or `None` when it
-    /// lies behind the camera.
+    /// lies behind the camera or beyond the lens model's fold ([`Intrinsics::inside_fold`]).
     pub fn project(&self, p: DVec3) -> Option<DVec2> {
         if p.z <= NEAR_MM {
             return None;
         }
         let d = self.distort_parts(p.x / p.z, p.y / p.z);
+        if !self.inside_fold(d.r2) {
+            return None;
+        }
         Some(DVec2::new(
             self.fx * d.xd + self.cx,
             self.fy * d.yd + self.cy,
@@ -230,13 +270,16 @@ impl Intrinsics {
     }
 
     /// Jacobian of the pixel with respect to the camera-frame point, rows (u, v), columns
-    /// (X, Y, Z). `None` behind the camera.
+    /// (X, Y, Z). `None` where [`Intrinsics::project`] is.
     pub fn jacobian_point(&self, p: DVec3) -> Option<[[f64; 3]; 2]> {
         if p.z <= NEAR_MM {
             return None;
         }
         let inv_z = 1.0 / p.z;
         let d = self.distort_parts(p.x * inv_z, p.y * inv_z);
+        if !self.inside_fold(d.r2) {
+            return None;
+        }
         let (x, y) = (d.xn, d.yn);
         // Derivative of the radial factor with respect to r², then the 2×2 distortion Jacobian.
         let dradial = self.radial_slope(d.r2);
@@ -260,6 +303,9 @@ impl Intrinsics {
             return None;
         }
         let d = self.distort_parts(p.x / p.z, p.y / p.z);
+        if !self.inside_fold(d.r2) {
+            return None;
+        }
         Some([
             [d.xd, 0.0, 1.0, 0.0, self.fx * d.xn * d.r2],
             [0.0, d.yd, 0.0, 1.0, self.fy * d.yn * d.r2],
@@ -519,5 +565,62 @@ mod tests {
         let cam = Intrinsics::pinhole(1000.0, 1000.0, 480.0, 270.0);
         assert!(cam.project(DVec3::new(0.0, 0.0, -5.0)).is_none());
         assert!(cam.jacobian_point(DVec3::new(1.0, 0.0, 0.0)).is_none());
+    }
+
+    /// Beyond the radial polynomial's fold a point is not imaged: with k1 and k2 both
+    /// negative, a point 70° off the axis would otherwise land back inside the image. Checked
+    /// against a brute-force walk outwards along the ray's radius, for lenses of both signs
+    /// and with k3.
+    #[test]
+    fn points_beyond_the_lens_fold_are_not_projected() {
+        let mut cam = Intrinsics::pinhole(504.0, 504.0, 239.5, 134.5);
+        cam.k1 = -0.0366;
+        cam.k2 = -0.0066;
+        // 70° off the axis: r = tan 70° = 2.75, past the fold at r ≈ 2.02.
+        let far = DVec3::new(70f64.to_radians().tan() * 100.0, 0.0, 100.0);
+        let wrapped = cam.distort(DVec2::new(far.x / far.z, 0.0));
+        assert!(wrapped.x < 1.0, "the polynomial folds back ({wrapped})");
+        assert!(cam.project(far).is_none());
+        assert!(cam.jacobian_point(far).is_none());
+        assert!(cam.jacobian_intrinsics(far).is_none());
+        // The image's corner is well inside.
+        assert!(
+            cam.project(DVec3::new(0.5 * 150.0, 0.3 * 150.0, 150.0))
+                .is_some()
+        );
+        // Brute force: the first r at which the distorted radius stops growing, against the
+        // first r at which a point is refused, for lenses of every sign.
+        let mut rng = Rng::new(17);
+        for _ in 0..300 {
+            let mut c = Intrinsics::pinhole(500.0, 500.0, 240.0, 135.0);
+            c.k1 = rng.range(-0.5, 0.3);
+            c.k2 = rng.range(-0.2, 0.2);
+            c.k3 = if rng.range(0.0, 1.0) < 0.5 {
+                0.0
+            } else {
+                rng.range(-0.05, 0.05)
+            };
+            let radius = |r: f64| r * (1.0 + r * r * (c.k1 + r * r * (c.k2 + r * r * c.k3)));
+            let step = 1e-3;
+            let mut fold = None;
+            let mut refused = None;
+            for i in 1..4000 {
+                let r = i as f64 * step;
+                if fold.is_none() && radius(r) <= radius(r - step) {
+                    fold = Some(r);
+                }
+                if refused.is_none() && c.project(DVec3::new(r, 0.0, 1.0)).is_none() {
+                    refused = Some(r);
+                }
+            }
+            match (fold, refused) {
+                (None, None) => {}
+                (Some(f), Some(r)) => assert!(
+                    (f - r).abs() <= 2.0 * step,
+                    "{c:?}: the radius turns at r = {f}, refused from {r}"
+                ),
+                other => panic!("{c:?}: fold and refusal disagree: {other:?}"),
+            }
+        }
     }
 }

@@ -96,6 +96,9 @@ struct Tool {
 }
 
 /// The phantom's fixed parts; frames are rendered on demand.
+/// A tool's shaft radius (mm).
+pub const TOOL_RADIUS_MM: f64 = 4.0;
+
 pub struct Phantom {
     pub options: SynthOptions,
     pub structures: Vec<(String, u8, bool, Mesh)>,
@@ -406,6 +409,15 @@ impl Phantom {
                 }
                 c
             })
+            .collect()
+    }
+
+    /// Each tool's axis at frame t, from where it enters to its tip (mm, camera-0 frame); the
+    /// shaft is a cylinder of [`TOOL_RADIUS_MM`] about it.
+    pub fn tool_axes(&self, t: usize) -> Vec<(DVec3, DVec3)> {
+        self.tools
+            .iter()
+            .map(|tool| self.tool_axis(tool, t))
             .collect()
     }
 

@@ -66,7 +66,7 @@ impl Phantom {
             .collect();
         for tool in &self.tools {
             let (entry, tip) = self.tool_axis(tool, t);
-            let (mesh, coords) = cylinder(entry, tip, 4.0, 20);
+            let (mesh, coords) = cylinder(entry, tip, super::TOOL_RADIUS_MM, 20);
             out.push(Drawn {
                 normals: mesh.vertex_normals(),
                 posed: mesh.vertices,
@@ -316,14 +316,22 @@ impl Phantom {
 }
 
 /// A capped cylinder from `a` to `b`; texture coordinates are (distance from b, angle, 0).
+/// The shaft is cut into rings at most 4 mm apart: its far end lies well outside the view
+/// (beyond the lens model's fold, where nothing is projected), and one triangle from there
+/// to the tip would drop the whole visible shaft with it.
 fn cylinder(a: DVec3, b: DVec3, radius: f64, segments: usize) -> (Mesh, Vec<DVec3>) {
     let axis = (b - a).normalize_or(DVec3::Z);
     let u = axis.any_orthonormal_vector();
     let v = axis.cross(u);
     let len = (b - a).length();
+    let shaft = (len - 14.0).max(0.0);
+    let pieces = (shaft / 4.0).ceil().max(1.0) as usize;
+    let mut rings: Vec<f64> = (0..=pieces)
+        .map(|i| shaft * i as f64 / pieces as f64)
+        .collect();
+    rings.push(len);
     let mut verts = Vec::new();
     let mut coords = Vec::new();
-    let rings = [0.0, len - 14.0, len];
     for &s in &rings {
         for k in 0..segments {
             let ang = k as f64 / segments as f64 * std::f64::consts::TAU;
@@ -336,7 +344,8 @@ fn cylinder(a: DVec3, b: DVec3, radius: f64, segments: usize) -> (Mesh, Vec<DVec
     let tip = (verts.len() - 1) as u32;
     let mut faces = Vec::new();
     let seg = segments as u32;
-    for r in 0..2u32 {
+    let last = (rings.len() - 1) as u32;
+    for r in 0..last {
         for k in 0..seg {
             let (i0, i1) = (r * seg + k, r * seg + (k + 1) % seg);
             faces.push([i0, i1, i1 + seg]);
@@ -344,7 +353,7 @@ fn cylinder(a: DVec3, b: DVec3, radius: f64, segments: usize) -> (Mesh, Vec<DVec
         }
     }
     for k in 0..seg {
-        faces.push([2 * seg + k, 2 * seg + (k + 1) % seg, tip]);
+        faces.push([last * seg + k, last * seg + (k + 1) % seg, tip]);
     }
     (Mesh::new(verts, faces), coords)
 }
