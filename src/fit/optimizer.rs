@@ -6,7 +6,7 @@
 
 pub use super::config::{FitParams, Mode};
 use super::context::FrameContext;
-use super::lines::target::confidence;
+use super::lines::target::{confidence, line_contrasts, structure_confidence};
 use super::lines::{EnergyParams, Line, LineTerm};
 use super::objective::{ImageTerm, NormalEquations, Prior};
 use super::priors::{CameraDamping, PoseDamping, ShapePrior, StrainPrior};
@@ -27,6 +27,8 @@ pub struct FrameFit {
     /// Mean forest probability of a structure just inside its fitted contour minus just
     /// outside, over all lines of the finest level, in [0, 1].
     pub confidence: f64,
+    /// The same per visible structure, then averaged over them ([`structure_confidence`]).
+    pub structure_confidence: f64,
     pub lines: usize,
     /// The joint information of the fitted state (pose, shape, the rig's intrinsics), when
     /// `params.information` asks for it and the model has hidden structures.
@@ -386,9 +388,11 @@ pub fn fit_frame(
                 super::information::joint_information(ctx, &lines, &matches, &state, &ep, params)
             })
         });
+    let contrasts = line_contrasts(&lines, &state, ctx, &ep);
     FrameFit {
         information,
-        confidence: confidence(&lines, &state, ctx, &ep),
+        confidence: confidence(&contrasts),
+        structure_confidence: structure_confidence(&contrasts, &ctx.imaged()),
         energy,
         iterations,
         lines: lines.len(),

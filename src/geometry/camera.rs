@@ -207,7 +207,8 @@ impl Intrinsics {
             return true;
         }
         let d = |s: f64| 1.0 + s * (3.0 * k1 + s * (5.0 * k2 + s * 7.0 * k3));
-        if !(d(r2) > 0.0) {
+        let at_r2 = d(r2);
+        if at_r2.is_nan() || at_r2 <= 0.0 {
             return false;
         }
         let (a, b, c) = (21.0 * k3, 10.0 * k2, 3.0 * k1);

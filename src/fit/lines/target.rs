@@ -93,11 +93,41 @@ pub fn line_target(line: &Line, c: DVec2, ep: &EnergyParams) -> (f64, f64) {
     (mean, var.max(ep.min_softmin_variance_px2))
 }
 
-/// Mean p_f just inside minus just outside the fitted contours, over lines, clamped to [0, 1].
-pub fn confidence(lines: &[Line], state: &FitState, ctx: &FrameContext, ep: &EnergyParams) -> f64 {
+/// Mean p_f just inside minus just outside the fitted contours, over lines, clamped to [0, 1]
+/// (`contrasts` from [`line_contrasts`]).
+pub fn confidence(contrasts: &[(usize, f64)]) -> f64 {
+    mean_clamped(contrasts.iter().map(|&(_, c)| c))
+}
+
+/// [`confidence`] per structure, then averaged over `structures` (those the forest knows): a
+/// small exophytic tumour counts as much as the kidney, whose outline alone cannot tell the
+/// organ from its mirror image, and a structure without a line (turned out of sight) counts 0.
+pub fn structure_confidence(contrasts: &[(usize, f64)], structures: &[usize]) -> f64 {
+    mean_clamped(
+        structures
+            .iter()
+            .map(|&s| mean_clamped(contrasts.iter().filter(|&&(t, _)| t == s).map(|&(_, c)| c))),
+    )
+}
+
+fn mean_clamped(values: impl Iterator<Item = f64>) -> f64 {
+    let (sum, n) = values.fold((0.0, 0usize), |(s, n), v| (s + v, n + 1));
+    if n == 0 {
+        0.0
+    } else {
+        (sum / n as f64).clamp(0.0, 1.0)
+    }
+}
+
+/// Each line's structure and its mean p_f just inside minus just outside the fitted contour.
+pub fn line_contrasts(
+    lines: &[Line],
+    state: &FitState,
+    ctx: &FrameContext,
+    ep: &EnergyParams,
+) -> Vec<(usize, f64)> {
     let deformed = ctx.model.deformed(&state.shape);
-    let mut sum = 0.0;
-    let mut n = 0usize;
+    let mut out = Vec::with_capacity(lines.len());
     for line in lines {
         let Some(c) = ctx.contour_point(line, state, &deformed, ep.level) else {
             continue;
@@ -114,15 +144,10 @@ pub fn confidence(lines: &[Line], state: &FitState, ctx: &FrameContext, ep: &Ene
             }
         }
         if nin > 0 && nout > 0 {
-            sum += pin / nin as f64 - pout / nout as f64;
-            n += 1;
+            out.push((line.structure, pin / nin as f64 - pout / nout as f64));
         }
     }
-    if n == 0 {
-        0.0
-    } else {
-        (sum / n as f64).clamp(0.0, 1.0)
-    }
+    out
 }
 
 #[cfg(test)]
@@ -174,5 +199,32 @@ mod tests {
         let (target, var) = line_target(&l, c, &EnergyParams::default());
         assert_eq!(target, 5.0);
         assert_eq!(var, EnergyParams::default().saturated_line_variance_px2);
+    }
+
+    /// The placement's choice between a mirror image whose kidney outline fits a little better
+    /// and the right pose, whose small tumour fits too: over all lines the mirror wins, per
+    /// structure the right pose does; a structure turned out of sight counts 0.
+    #[test]
+    fn per_structure_confidence_lets_the_small_tumour_tell_the_mirror_image() {
+        let lines = |kidney: f64, tumour: Option<f64>| -> Vec<(usize, f64)> {
+            let mut v = vec![(0, kidney); 60];
+            if let Some(t) = tumour {
+                v.extend(std::iter::repeat_n((1, t), 6));
+            }
+            v
+        };
+        let mirror = lines(0.9, Some(-0.1));
+        let right = lines(0.8, Some(0.7));
+        assert!(confidence(&mirror) > confidence(&right));
+        let structures = [0, 1];
+        assert!(
+            structure_confidence(&right, &structures) > structure_confidence(&mirror, &structures)
+        );
+        let hidden = lines(0.9, None);
+        assert!((structure_confidence(&hidden, &structures) - 0.45).abs() < 1e-12);
+        assert!(
+            structure_confidence(&right, &structures) > structure_confidence(&hidden, &structures)
+        );
+        assert_eq!(structure_confidence(&[], &structures), 0.0);
     }
 }
