@@ -198,8 +198,8 @@ impl Intrinsics {
     /// tool's far shaft as black wedges across the organ. Such points are not imaged.
     ///
     /// Exact: the derivative d(s) = 1 + 3k1 s + 5k2 s² + 7k3 s³ of the distorted radius (s = r²)
-    /// is positive at 0, so it stays positive on [0, r2] unless it is not at r2 or at one of its
-    /// own turning points inside (roots of 3k1 + 10k2 s + 21k3 s²).
+    /// is 1 at the centre, and it stays positive on [0, r2] exactly when it is positive at r2
+    /// and at its own turning points inside (the roots of 3k1 + 10k2 s + 21k3 s²).
     fn inside_fold(&self, r2: f64) -> bool {
         let (k1, k2, k3) = (self.k1, self.k2, self.k3);
         // Most calls are well inside the view: a bound that needs no roots.
