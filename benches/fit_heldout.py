@@ -114,8 +114,10 @@ TUNING = [
     (1510, 480, 270, 0.10, 2, None, True),
     (1511, 960, 540, 0.10, 2, None, False),
     (1512, 480, 270, 0.03, 4, "case_00201", True),
-]
-TEST = [
+
+    # The sixth test set: run once on 2026-12-05 (seventh session) with the phantom's tool
+    # wedges fixed, so it joined the tuning set; 1901-1912 were fixed the same day before the
+    # first frame's pose damping was measured.
     (1701, 960, 540, 0.05, 2, None, True),
     (1702, 960, 540, 0.03, 2, "case_00127", True),
     (1703, 960, 540, 0.08, 2, None, False),
@@ -128,6 +130,20 @@ TEST = [
     (1710, 480, 270, 0.10, 2, "case_00204", True),
     (1711, 960, 540, 0.10, 2, None, True),
     (1712, 480, 270, 0.03, 4, None, False),
+]
+TEST = [
+    (1901, 960, 540, 0.03, 2, None, True),
+    (1902, 960, 540, 0.05, 2, "case_00134", True),
+    (1903, 960, 540, 0.10, 2, None, False),
+    (1904, 480, 270, 0.08, 2, None, True),
+    (1905, 480, 270, 0.03, 2, "case_00138", True),
+    (1906, 480, 270, 0.05, 2, None, True),
+    (1907, 480, 270, 0.10, 2, "case_00153", False),
+    (1908, 480, 270, 0.05, 4, None, True),
+    (1909, 960, 540, 0.02, 2, None, True),
+    (1910, 480, 270, 0.08, 2, None, True),
+    (1911, 960, 540, 0.08, 2, None, True),
+    (1912, 480, 270, 0.03, 4, "case_00050", True),
 ]
 FRAMES = 40
 
