@@ -95,10 +95,13 @@ struct Tool {
     phase: f64,
 }
 
-/// The phantom's fixed parts; frames are rendered on demand.
 /// A tool's shaft radius (mm).
 pub const TOOL_RADIUS_MM: f64 = 4.0;
 
+/// The length of a tool's bare metal tip (mm); the rest of the shaft is dark.
+const TOOL_TIP_MM: f64 = 14.0;
+
+/// The phantom's fixed parts; frames are rendered on demand.
 pub struct Phantom {
     pub options: SynthOptions,
     pub structures: Vec<(String, u8, bool, Mesh)>,

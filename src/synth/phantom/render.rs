@@ -3,7 +3,7 @@
 //! smoke, noise), with the frame's ground truth: labels, tool masks, hidden structures'
 //! projections and the true pose, cameras and centroids.
 
-use super::{KIDNEY_DEPTH_MM, Phantom};
+use super::{KIDNEY_DEPTH_MM, Phantom, TOOL_RADIUS_MM, TOOL_TIP_MM};
 use crate::geometry::mesh::vertex_normals;
 use crate::geometry::{Affine, Camera, Mesh};
 use crate::plane::{LabelImage, Mask};
@@ -66,7 +66,7 @@ impl Phantom {
             .collect();
         for tool in &self.tools {
             let (entry, tip) = self.tool_axis(tool, t);
-            let (mesh, coords) = cylinder(entry, tip, super::TOOL_RADIUS_MM, 20);
+            let (mesh, coords) = cylinder(entry, tip, TOOL_RADIUS_MM, 20);
             out.push(Drawn {
                 normals: mesh.vertex_normals(),
                 posed: mesh.vertices,
@@ -239,7 +239,7 @@ impl Phantom {
                         let material = match d.kind {
                             DrawnKind::Structure(0) => Material::Kidney,
                             DrawnKind::Structure(_) => Material::Tumour,
-                            DrawnKind::Tool if tex.x < 14.0 => Material::ToolMetal,
+                            DrawnKind::Tool if tex.x < TOOL_TIP_MM => Material::ToolMetal,
                             DrawnKind::Tool => Material::ToolShaft,
                             DrawnKind::Background => Material::Fat,
                         };
@@ -324,7 +324,7 @@ fn cylinder(a: DVec3, b: DVec3, radius: f64, segments: usize) -> (Mesh, Vec<DVec
     let u = axis.any_orthonormal_vector();
     let v = axis.cross(u);
     let len = (b - a).length();
-    let shaft = (len - 14.0).max(0.0);
+    let shaft = (len - TOOL_TIP_MM).max(0.0);
     let pieces = (shaft / 4.0).ceil().max(1.0) as usize;
     let mut rings: Vec<f64> = (0..=pieces)
         .map(|i| shaft * i as f64 / pieces as f64)
