@@ -36,8 +36,11 @@ pub struct FrameFit {
 }
 
 /// One damped Gauss–Newton step on `block` over the lines and the stereo matches; returns the
-/// new state. The image terms give the normal equations, Levenberg–Marquardt damps them, the
-/// block's priors add theirs; the step is accepted when the objective falls.
+/// new state and the line term's energy there. The image terms give the normal equations,
+/// Levenberg–Marquardt damps them, the block's priors add theirs; the step is accepted when
+/// the objective falls. `lines_energy`, when given, is the line term's energy at `state` on
+/// these very lines (the previous step's answer): the term is a pure function of the lines and
+/// the state, so it is not evaluated again.
 #[allow(clippy::too_many_arguments)]
 pub fn step(
     ctx: &FrameContext,
@@ -48,7 +51,8 @@ pub fn step(
     block: Block,
     ep: &EnergyParams,
     params: &FitParams,
-) -> Option<FitState> {
+    lines_energy: Option<f64>,
+) -> Option<(FitState, f64)> {
     let n = block.size(ctx.model);
     if n == 0 || lines.is_empty() {
         return None;
@@ -114,8 +118,10 @@ pub fn step(
     let priors = add_priors(ctx, state, prev, block, centre, params, &mut eq);
     let cholesky = eq.h.clone().cholesky()?;
     // Accept only steps that lower the objective: the image terms on these lines and matches
-    // plus the priors just added, the very energy the normal equations approximate.
-    let objective_at = |st: &FitState| {
+    // plus the priors just added, the very energy the normal equations approximate. The stereo
+    // term is linearised at `state` (its anchors' normals), so only the line term's energy
+    // carries over from one step to the next.
+    let energies_at = |st: &FitState, lines_energy: Option<f64>| {
         let moved;
         let d = if block == Block::Shape {
             moved = ctx.model.deformed(&st.shape);
@@ -123,12 +129,19 @@ pub fn step(
         } else {
             &deformed
         };
-        terms.iter().map(|t| t.energy(st, d)).sum::<f64>() + priors.energy(st)
+        let lines_energy = lines_energy.unwrap_or_else(|| line_term.energy(st, d));
+        (
+            lines_energy,
+            lines_energy + stereo_term.energy(st, d) + priors.energy(st),
+        )
     };
-    let objective =
-        |st: &FitState| super::profile::time(super::profile::Phase::Objective, || objective_at(st));
-    let before = objective(state);
-    let try_step = |delta: &DVector<f64>, tries: usize| -> Option<FitState> {
+    let objective = |st: &FitState, lines_energy: Option<f64>| {
+        super::profile::time(super::profile::Phase::Objective, || {
+            energies_at(st, lines_energy)
+        })
+    };
+    let (_, before) = objective(state, lines_energy);
+    let try_step = |delta: &DVector<f64>, tries: usize| -> Option<(FitState, f64)> {
         if delta.iter().any(|v| !v.is_finite()) {
             return None;
         }
@@ -156,8 +169,9 @@ pub fn step(
                     }
                 }
             }
-            if objective(&next) < before {
-                return Some(next);
+            let (lines_energy, total) = objective(&next, None);
+            if total < before {
+                return Some((next, lines_energy));
             }
             scale *= 0.5;
         }
@@ -305,6 +319,8 @@ pub fn fit_frame(
         .collect();
     let mut last_lines: Vec<Line> = Vec::new();
     let mut last_level = None;
+    // The line term's energy at `state` on `lines`, while both are unchanged.
+    let mut lines_energy: Option<f64> = None;
     let finest = levels.last().copied().unwrap_or(0);
     let mut matches = StereoSet::default();
     for &level in &levels {
@@ -339,6 +355,7 @@ pub fn fit_frame(
                                 ctx.build_lines_and_rasters(&state, views, appearance, &ep)
                             });
                         since_build = 0;
+                        lines_energy = None;
                         if !matched {
                             // Once per level, from the state the level starts at: the model moves
                             // little within a level, and point-to-plane lets it slide.
@@ -362,10 +379,20 @@ pub fn fit_frame(
                     last_level = Some(level);
                     iterations += 1;
                     let next = super::profile::time(super::profile::Phase::Steps, || {
-                        step(ctx, &lines, &matches, &state, prev, block, &ep, params)
+                        step(
+                            ctx,
+                            &lines,
+                            &matches,
+                            &state,
+                            prev,
+                            block,
+                            &ep,
+                            params,
+                            lines_energy,
+                        )
                     });
                     match next {
-                        Some(next) => state = next,
+                        Some((next, energy)) => (state, lines_energy) = (next, Some(energy)),
                         None => break,
                     }
                 }
@@ -376,12 +403,14 @@ pub fn fit_frame(
     let final_level = levels.last().copied().unwrap_or(0);
     let ep = params.energy_at(final_level);
     // The last block's lines serve for the energy and confidence when they are at this level.
-    let lines = if last_level == Some(final_level) && !last_lines.is_empty() {
-        last_lines
+    let (lines, energy) = if last_level == Some(final_level) && !last_lines.is_empty() {
+        let energy = lines_energy.unwrap_or_else(|| ctx.energy(&last_lines, &state, &ep));
+        (last_lines, energy)
     } else {
-        ctx.build_lines(&state, views, appearance, &ep)
+        let lines = ctx.build_lines(&state, views, appearance, &ep);
+        let energy = ctx.energy(&lines, &state, &ep);
+        (lines, energy)
     };
-    let energy = ctx.energy(&lines, &state, &ep);
     let information =
         (params.information && ctx.model.structures.iter().any(|s| !s.visible)).then(|| {
             super::profile::time(super::profile::Phase::Information, || {
