@@ -79,8 +79,14 @@ impl Default for HiddenRegionConfig {
             // them) these held LSC 95.2 % at 4.88 mm and LS 94.9 % at 5.38 mm; the joint search
             // there (s 0.25, e 1.5, k 0, d_c 0.015, u 1, g 8) traded LSC's region (5.54 mm) for
             // LS's (4.21 mm) and was not taken. The test scenes 1801-1816 are only reported.
-            covariance_scale: 16.0,
-            model_error_mm: 0.5,
+            // After the first frame's pose damping went 0.1 -> 0.03 (2026-12-05, eighth
+            // session) the 80 tuning scenes (1801-1816 among them; 1752 frames per mode) held
+            // LSC 97.4 % at 4.76 mm and LS 97.1 % at 5.16 mm with the constants before (s 16,
+            // e 0.5, k 2, g 0.5); the joint search chose these, LSC 95.0 % at 4.24 mm and LS
+            // 96.3 % at 4.43 mm. The test scenes 2001-2016 were fixed before and are only
+            // reported.
+            covariance_scale: 4.0,
+            model_error_mm: 0.75,
             model_error_per_rim_residual: 2.0,
             focal_sd: 0.005,
             principal_sd_px: 2.0,
@@ -88,7 +94,7 @@ impl Default for HiddenRegionConfig {
             zoom_depth_sd_uncorrected: 0.0,
             zoom_depth_per_depth_change: 0.75,
             probability: 0.95,
-            lost_growth_mm_per_frame: 0.5,
+            lost_growth_mm_per_frame: 6.0,
         }
     }
 }

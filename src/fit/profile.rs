@@ -93,17 +93,24 @@ pub fn add(phase: Phase, elapsed: std::time::Duration) {
     NANOS[phase as usize].fetch_add(elapsed.as_nanos() as u64, Ordering::Relaxed);
 }
 
-/// Ends a frame: after the first one (coarse to fine, several times a tracked frame's work)
-/// every phase starts again from zero, so the report is of tracked frames only.
-pub fn frame_done(first: bool, elapsed: std::time::Duration) {
+/// Correspondence lines of the tracked frames' final states (how much work a frame is: the
+/// line count follows the rim's length and the mesh's density).
+static LINES: AtomicU64 = AtomicU64::new(0);
+
+/// Ends a frame that fitted `lines` correspondence lines: after the first one (coarse to fine,
+/// several times a tracked frame's work) every phase starts again from zero, so the report is
+/// of tracked frames only.
+pub fn frame_done(first: bool, elapsed: std::time::Duration, lines: usize) {
     if first {
         for n in &NANOS {
             n.store(0, Ordering::Relaxed);
         }
         FRAMES.store(0, Ordering::Relaxed);
-    } else {
+        LINES.store(0, Ordering::Relaxed);
+    } else if enabled() {
         add(Phase::Frame, elapsed);
         FRAMES.fetch_add(1, Ordering::Relaxed);
+        LINES.fetch_add(lines as u64, Ordering::Relaxed);
     }
 }
 
@@ -119,5 +126,9 @@ pub fn report() -> Option<String> {
             format!("{name} {ms:.1}")
         })
         .collect();
-    Some(format!("ms per tracked frame: {}", parts.join(", ")))
+    let lines = LINES.load(Ordering::Relaxed) as f64 / n;
+    Some(format!(
+        "ms per tracked frame: {}; {lines:.0} lines per frame",
+        parts.join(", ")
+    ))
 }

@@ -650,7 +650,7 @@ pub fn track(
             tracker.zoom_history = tracker.zoom_history.with_reference(&tracker.regions);
         }
         let elapsed = started.elapsed();
-        super::profile::frame_done(t == options.frames.0, elapsed);
+        super::profile::frame_done(t == options.frames.0, elapsed, fit.lines);
         let ms = elapsed.as_secs_f64() * 1e3;
         let Rendered {
             mut labels,
