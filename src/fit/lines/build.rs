@@ -66,14 +66,6 @@ impl FrameContext<'_> {
                 let (w, h) = (size.0 as i64, size.1 as i64);
                 let mut taken = std::collections::HashSet::new();
                 let mut view_lines = Vec::new();
-                // Rim points (edge ends, image point, outward normal) of one structure.
-                let mut rim: Vec<(u32, u32, DVec2, DVec2)> = Vec::new();
-                let pick = |q: DVec2| -> Option<usize> {
-                    let (x, y) = (q.x.round() as i64, q.y.round() as i64);
-                    (x >= 0 && y >= 0 && x < w && y < h).then(|| (y * w + x) as usize)
-                };
-                // Rim points sit halfway along their edge.
-                let t = 0.5;
                 let rim_started = crate::fit::profile::enabled().then(std::time::Instant::now);
                 for (oi, &si) in visible.iter().enumerate() {
                     let st = &self.model.structures[si];
@@ -105,6 +97,7 @@ impl FrameContext<'_> {
                         ) else {
                             continue;
                         };
+                        let t = 0.5;
                         let p = verts[e.a as usize].lerp(verts[e.b as usize], t);
                         let Some(c) = lcam.project(p) else { continue };
                         let dir = pb - pa;
@@ -116,6 +109,10 @@ impl FrameContext<'_> {
                             n = -n;
                         }
                         // Confirm the rim point bounds the structure's visible region here.
+                        let pick = |q: DVec2| -> Option<usize> {
+                            let (x, y) = (q.x.round() as i64, q.y.round() as i64);
+                            (x >= 0 && y >= 0 && x < w && y < h).then(|| (y * w + x) as usize)
+                        };
                         let pick_vis = |q: DVec2| -> Option<usize> {
                             let q = (q + DVec2::splat(0.5)) * 0.5 - DVec2::splat(0.5);
                             let (x, y) = (q.x.round() as i64, q.y.round() as i64);
@@ -138,26 +135,12 @@ impl FrameContext<'_> {
                         {
                             continue;
                         }
-                        rim.push((e.a, e.b, c, n));
-                    }
-                    // One line per cell: neighbouring rim points add little but cost. A dense
-                    // mesh has more rim edges along the same outline; past `max_rim_lines` the
-                    // cells grow so the outline keeps about that many lines, whatever the mesh.
-                    let cells = |side: f64| {
-                        let mut seen = std::collections::HashSet::new();
-                        rim.iter()
-                            .filter(|r| seen.insert(((r.2.x / side) as i64, (r.2.y / side) as i64)))
-                            .count()
-                    };
-                    let mut side = params.line_cell_px;
-                    if params.max_rim_lines > 0 {
-                        let count = cells(side);
-                        if count > params.max_rim_lines {
-                            side *= count as f64 / params.max_rim_lines as f64;
-                        }
-                    }
-                    for (a, b, c, n) in rim.drain(..) {
-                        let cell = ((c.x / side) as i64, (c.y / side) as i64, si);
+                        // One line per cell: neighbouring rim points add little but cost.
+                        let cell = (
+                            (c.x / params.line_cell_px) as i64,
+                            (c.y / params.line_cell_px) as i64,
+                            si,
+                        );
                         if !taken.insert(cell) {
                             continue;
                         }
@@ -180,8 +163,8 @@ impl FrameContext<'_> {
                         view_lines.push(Line {
                             view: m,
                             structure: si,
-                            a,
-                            b,
+                            a: e.a,
+                            b: e.b,
                             t,
                             normal: n,
                             samples,

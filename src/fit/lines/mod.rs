@@ -53,9 +53,6 @@ pub struct EnergyParams {
     pub rim_depth_tolerance: f64,
     /// At most one line per square cell of this side (level pixels).
     pub line_cell_px: f64,
-    /// Where a structure's rim in one view fills more cells than this, the cells grow so that
-    /// it keeps about this many lines (0: no limit).
-    pub max_rim_lines: usize,
     /// The confidence compares p_f on samples further than this inside and outside the
     /// fitted contour (level pixels).
     pub confidence_band_px: f64,
@@ -75,7 +72,6 @@ impl Default for EnergyParams {
             rim_check_px: 3.0,
             rim_depth_tolerance: 0.08,
             line_cell_px: 2.0,
-            max_rim_lines: 0,
             confidence_band_px: 1.5,
         }
     }
