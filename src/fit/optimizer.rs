@@ -158,7 +158,11 @@ pub fn step(
         for _ in 0..tries {
             let scaled: Vec<f64> = full.iter().map(|d| d * scale).collect();
             let mut next = apply_increment(state, block, &scaled, centre);
-            ctx.model.shape.pca.clamp_weights(&mut next.shape);
+            // Only the shape block moves the weights; the others' energies are evaluated
+            // with the shape instance of `state` (and carried to the next step as such).
+            if block == Block::Shape {
+                ctx.model.shape.pca.clamp_weights(&mut next.shape);
+            }
             if holds_fy_k1 {
                 for (m, intr) in next.intrinsics.iter_mut().enumerate() {
                     if let Some(cal) = ctx.cameras.get(m) {

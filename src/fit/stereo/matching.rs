@@ -114,14 +114,15 @@ impl Grey {
 /// Intensity sampled bilinearly; None outside the image.
 #[inline]
 fn sample(img: &Grey, p: DVec2) -> Option<f64> {
-    // Negative (and NaN) coordinates first: for the rest truncation is the floor, and the
-    // matcher's ~130,000 samples a frame no longer call libm's `floor` (the build targets
-    // x86-64 without SSE4.1's rounding instruction).
+    // Negative and NaN coordinates first (NaN was sampled at 0 before): for the rest
+    // truncation is the floor, and the matcher's ~130,000 samples a frame no longer call
+    // libm's `floor` (the build targets x86-64 without SSE4.1's rounding instruction). Huge
+    // ones saturate at i64::MAX, so the bound is checked without adding to them.
     if !(p.x >= 0.0 && p.y >= 0.0) {
         return None;
     }
     let (x0, y0) = (p.x as i64, p.y as i64);
-    if x0 + 1 >= img.width || y0 + 1 >= img.height {
+    if x0 >= img.width - 1 || y0 >= img.height - 1 {
         return None;
     }
     let (fx, fy) = (p.x - x0 as f64, p.y - y0 as f64);
