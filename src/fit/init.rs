@@ -169,11 +169,13 @@ pub fn automatic_pose(
     let params = config.resolve(Mode::R, Phase::Placement, Zoom::Off, 0);
     let pyramid = params.levels.iter().max().map_or(1, |l| l + 1);
     let mut best: Option<(f64, Affine)> = None;
+    // One set of views for every candidate: a pixel's probabilities do not depend on the
+    // pose asking for them, so each candidate reuses what the others classified.
+    let mut views: Vec<ViewProbabilities> = frames
+        .iter()
+        .map(|f| ViewProbabilities::new(f.clone(), pyramid, classes.len()))
+        .collect();
     for (_, affine) in scored.into_iter().take(placement.refined) {
-        let mut views: Vec<ViewProbabilities> = frames
-            .iter()
-            .map(|f| ViewProbabilities::new(f.clone(), pyramid, classes.len()))
-            .collect();
         let start = FitState {
             affine,
             shape: vec![0.0; model.shape.mode_count()],
