@@ -160,8 +160,9 @@ TUNING = [
     (2110, 480, 270, 0.10, 2, "case_00144", True),
     (2111, 960, 540, 0.10, 2, None, True),
     (2112, 480, 270, 0.03, 4, None, True),
-]
-TEST = [
+    # The ninth test set: run once on 2026-12-05 (ninth session) with that session's final
+    # fit (the placement refining 12 candidates), so it joined the tuning set; 2501-2512 were
+    # fixed the same day before anything else was run.
     (2301, 960, 540, 0.05, 2, None, True),
     (2302, 960, 540, 0.03, 2, "case_00051", True),
     (2303, 960, 540, 0.10, 2, None, False),
@@ -174,6 +175,20 @@ TEST = [
     (2310, 480, 270, 0.08, 2, "case_00174", True),
     (2311, 960, 540, 0.08, 2, None, True),
     (2312, 480, 270, 0.03, 4, None, False),
+]
+TEST = [
+    (2501, 960, 540, 0.05, 2, None, True),
+    (2502, 960, 540, 0.03, 2, "case_00117", True),
+    (2503, 960, 540, 0.08, 2, None, False),
+    (2504, 480, 270, 0.10, 2, None, True),
+    (2505, 480, 270, 0.03, 2, "case_00009", True),
+    (2506, 480, 270, 0.05, 2, None, True),
+    (2507, 480, 270, 0.08, 2, "case_00201", False),
+    (2508, 480, 270, 0.05, 4, None, True),
+    (2509, 960, 540, 0.02, 2, None, True),
+    (2510, 480, 270, 0.10, 2, "case_00013", True),
+    (2511, 960, 540, 0.10, 2, None, True),
+    (2512, 480, 270, 0.03, 4, None, False),
 ]
 FRAMES = 40
 
