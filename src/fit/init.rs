@@ -169,8 +169,9 @@ pub fn automatic_pose(
     let params = config.resolve(Mode::R, Phase::Placement, Zoom::Off, 0);
     let pyramid = params.levels.iter().max().map_or(1, |l| l + 1);
     let mut best: Option<(f64, Affine)> = None;
-    // One set of views for every candidate: a pixel's probabilities do not depend on the
-    // pose asking for them, so each candidate reuses what the others classified.
+    // One set of views for every candidate: a pixel's probabilities depend neither on the
+    // pose asking for them nor on the region its features were computed over
+    // (`FrameFeatures::valid`), so each candidate reuses what the others classified.
     let mut views: Vec<ViewProbabilities> = frames
         .iter()
         .map(|f| ViewProbabilities::new(f.clone(), pyramid, classes.len()))

@@ -424,13 +424,13 @@ pub struct PlacementConfig {
     pub rolls: usize,
     /// Best hypotheses refined by a rigid fit. The coarse score often ranks the right
     /// orientation below a few wrong ones. Measured on the 102 tuning scenes of
-    /// `benches/fit_heldout.py` without `initial_pose` (LSC, frames 0–3; 2026-12-05, ninth
-    /// session), frame-0 Dice for 6 / 12 / 24 refined:
+    /// `benches/fit_heldout.py` then (301–2112), without `initial_pose` (LSC, frames 0–3;
+    /// 2026-12-05, ninth session), frame-0 Dice for 6 / 12 / 24 refined:
     /// - mean 0.943 / 0.947 / 0.947;
     /// - with 12, nine scenes gained up to 0.12 (404 0.85 → 0.97, 1407 0.79 → 0.86) and
     ///   three lost up to 0.02;
-    /// - 24 added nothing, and 12 with 12 rolls gave a mean of 0.949 but a fifth scene
-    ///   under 0.8.
+    /// - 24 added nothing, and 12 with 12 rolls gave a mean of 0.949 but five scenes under
+    ///   0.8 where 12 alone leaves four (906, 909, 1506, 2107: KiTS patients).
     ///
     /// Each one refined costs a rigid coarse fit, 20–60 ms at 960×540.
     pub refined: usize,
