@@ -170,10 +170,10 @@ pub struct FirstFrameConfig {
     /// Pose damping: the initial pose is only a rough guess, so it is held lightly. At 0.1 the
     /// first frame kept a third of the start's depth error (frame-0 kidney depth error ≈ 0.34 ×
     /// the start's depth offset, over 66 tuning scenes) and later frames inherited it. On the
-    /// 78 tuning scenes of `benches/fit_heldout.py` then (301–1712; LSC) 0.1 / 0.05 / 0.03 / 0.01 / 0 gave
-    /// Dice 0.944 / 0.945 / 0.946 / 0.944 / 0.939, hidden tumour 2.03 / 1.89 / 1.85 / 1.87 /
-    /// 2.23 mm (worst 7.08 / 7.26 / 7.01 / 10.8 / 31.9: with nothing holding it, the first frame
-    /// of 407 ran away), fx error 0.80 / 0.74 / 0.75 / 0.75 / 0.81 %.
+    /// 78 tuning scenes of `benches/fit_heldout.py` then (301–1712; LSC) 0.1 / 0.05 / 0.03 /
+    /// 0.01 / 0 gave Dice 0.944 / 0.945 / 0.946 / 0.944 / 0.939, hidden tumour 2.03 / 1.89 /
+    /// 1.85 / 1.87 / 2.23 mm (worst 7.08 / 7.26 / 7.01 / 10.8 / 31.9: with nothing holding it,
+    /// the first frame of 407 ran away), fx error 0.80 / 0.74 / 0.75 / 0.75 / 0.81 %.
     pub pose_damping: f64,
     /// Stereo disparity search (px either side): the initial pose may be centimetres off in
     /// depth.
