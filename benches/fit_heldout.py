@@ -219,8 +219,9 @@ TUNING = [
     (2610, 480, 270, 0.10, 2, None, True),
     (2611, 960, 540, 0.10, 2, None, True),
     (2612, 480, 270, 0.03, 4, None, False),
-]
-TEST = [
+    # The twelfth test set: run once on 2026-12-06 (eleventh session) with that session's final
+    # fit (camera correction kept on three frames after a marked zoom instead of one), so it
+    # joined the tuning set; 2901-2912 were fixed the same day before anything else was run.
     (2801, 960, 540, 0.05, 2, None, True),
     (2802, 960, 540, 0.03, 2, "case_00023", True),
     (2803, 960, 540, 0.08, 2, None, False),
@@ -233,6 +234,20 @@ TEST = [
     (2810, 480, 270, 0.10, 2, "case_00010", True),
     (2811, 960, 540, 0.10, 2, None, True),
     (2812, 480, 270, 0.03, 4, None, False),
+]
+TEST = [
+    (2901, 960, 540, 0.05, 2, None, True),
+    (2902, 960, 540, 0.03, 2, "case_00010", True),
+    (2903, 960, 540, 0.08, 2, None, False),
+    (2904, 480, 270, 0.10, 2, None, True),
+    (2905, 480, 270, 0.03, 2, "case_00023", True),
+    (2906, 480, 270, 0.05, 2, None, True),
+    (2907, 480, 270, 0.08, 2, "case_00170", False),
+    (2908, 480, 270, 0.05, 4, None, True),
+    (2909, 960, 540, 0.02, 2, None, True),
+    (2910, 480, 270, 0.10, 2, "case_00003", True),
+    (2911, 960, 540, 0.10, 2, None, True),
+    (2912, 480, 270, 0.03, 4, None, False),
 ]
 FRAMES = 40
 
