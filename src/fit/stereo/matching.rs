@@ -136,27 +136,40 @@ fn channel_weights(img: &RgbImage, pixels: impl Iterator<Item = (u32, u32)>) -> 
     squared.map(|c| (3.0 * c / total) as f32)
 }
 
-/// Intensity sampled bilinearly; None outside the image.
+/// Bilinear interpolation of a row-major `width` × `height` grid (pixel centres at integer
+/// coordinates) at `p` from its values `at(index)`; None outside the grid's interior or where
+/// one of the four is None.
 #[inline]
-fn sample(img: &Grey, p: DVec2) -> Option<f64> {
+fn bilinear(
+    width: usize,
+    height: usize,
+    p: DVec2,
+    at: impl Fn(usize) -> Option<f64>,
+) -> Option<f64> {
     // Negative and NaN coordinates first (NaN was sampled at 0 before): for the rest
     // truncation is the floor, and the matcher's ~130,000 samples a frame no longer call
     // libm's `floor` (the build targets x86-64 without SSE4.1's rounding instruction). Huge
-    // ones saturate at i64::MAX, so the bound is checked without adding to them.
+    // ones saturate, so the bound is checked without adding to them.
     if !(p.x >= 0.0 && p.y >= 0.0) {
         return None;
     }
-    let (x0, y0) = (p.x as i64, p.y as i64);
-    if x0 >= img.width - 1 || y0 >= img.height - 1 {
+    let (x0, y0) = (p.x as usize, p.y as usize);
+    if x0 >= width.saturating_sub(1) || y0 >= height.saturating_sub(1) {
         return None;
     }
     let (fx, fy) = (p.x - x0 as f64, p.y - y0 as f64);
-    let i = (y0 * img.width + x0) as usize;
-    let w = img.width as usize;
-    let g = |k: usize| img.data[k] as f64;
-    let top = g(i) * (1.0 - fx) + g(i + 1) * fx;
-    let bottom = g(i + w) * (1.0 - fx) + g(i + w + 1) * fx;
+    let i = y0 * width + x0;
+    let top = at(i)? * (1.0 - fx) + at(i + 1)? * fx;
+    let bottom = at(i + width)? * (1.0 - fx) + at(i + width + 1)? * fx;
     Some(top * (1.0 - fy) + bottom * fy)
+}
+
+/// Intensity sampled bilinearly; None outside the image.
+#[inline]
+fn sample(img: &Grey, p: DVec2) -> Option<f64> {
+    bilinear(img.width as usize, img.height as usize, p, |k| {
+        Some(img.data[k] as f64)
+    })
 }
 
 /// Zero mean and unit norm in place; false when the values hold no texture.
@@ -414,23 +427,11 @@ fn refine_warped(
 /// The raster's depth (mm) at a point of it, bilinear between its pixel centres; None where
 /// one of the four is not covered.
 fn raster_depth(raster: &ViewRaster, p: DVec2) -> Option<f64> {
-    if !(p.x >= 0.0 && p.y >= 0.0) {
-        return None;
-    }
-    let (x0, y0) = (p.x as usize, p.y as usize);
     let depth = &raster.depth_mm;
-    // Huge (or infinite) coordinates saturate: compared without adding to them.
-    if x0 >= depth.width.saturating_sub(1) || y0 >= depth.height.saturating_sub(1) {
-        return None;
-    }
-    let (fx, fy) = (p.x - x0 as f64, p.y - y0 as f64);
-    let z = |x: usize, y: usize| {
-        let z = *depth.get(x, y) as f64;
+    bilinear(depth.width, depth.height, p, |k| {
+        let z = depth.data[k] as f64;
         z.is_finite().then_some(z)
-    };
-    let top = z(x0, y0)? * (1.0 - fx) + z(x0 + 1, y0)? * fx;
-    let bottom = z(x0, y0 + 1)? * (1.0 - fx) + z(x0 + 1, y0 + 1)? * fx;
-    Some(top * (1.0 - fy) + bottom * fy)
+    })
 }
 
 /// Whether `other` and `reference` form a stereo pair the term can match across: a baseline,
