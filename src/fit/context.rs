@@ -58,6 +58,28 @@ impl FrameContext<'_> {
         Some(cam.intrinsics.k1 + rel(fx) - rel(cam.intrinsics.fx))
     }
 
+    /// ∂k1/∂fx of camera `m` at focal length `fx` by the scene's relation ([`Self::k1_at`]);
+    /// 0 where k1 is held as calibrated.
+    pub fn k1_slope(&self, m: usize, fx: f64) -> f64 {
+        let (Some([_, c1, c2]), Some(cam)) = (self.k1_vs_focal, self.cameras.get(m)) else {
+            return 0.0;
+        };
+        if fx.abs() < 1e-9 {
+            return 0.0;
+        }
+        let w = cam.width as f64;
+        -c1 * w / (fx * fx) - 2.0 * c2 * w * w / (fx * fx * fx)
+    }
+
+    /// fy/fx of camera `m` as calibrated: a zoom keeps it.
+    pub fn calibrated_aspect(&self, m: usize) -> f64 {
+        self.cameras
+            .get(m)
+            .map(|c| c.intrinsics.fy / c.intrinsics.fx)
+            .filter(|a| a.is_finite())
+            .unwrap_or(1.0)
+    }
+
     /// The structures with an image term (a forest class), in the order their render objects
     /// take in the visibility rasters: a raster's object id `o` is structure `imaged()[o]`.
     pub fn imaged(&self) -> Vec<usize> {

@@ -59,14 +59,15 @@ impl Information {
 }
 
 /// A camera block row (five per camera) as the rig's shared fx, cx, cy move it: every camera
-/// by the same increment, fy by the increment times the camera's aspect fy/fx.
-fn shared_camera_row(row: &[f64], state: &FitState) -> [f64; CAMERA_COLUMNS] {
+/// by the same increment, fy by the increment times the camera's aspect fy/fx and k1 by the
+/// scene's k1-vs-focal slope (as the optimizer's step moves them).
+fn shared_camera_row(ctx: &FrameContext, row: &[f64], state: &FitState) -> [f64; CAMERA_COLUMNS] {
     let mut out = [0.0; CAMERA_COLUMNS];
     for (m, j) in row.chunks(5).enumerate() {
         let Some(intr) = state.intrinsics.get(m) else {
             break;
         };
-        if j.len() < 4 {
+        if j.len() < 5 {
             break;
         }
         let aspect = if intr.fx.abs() > 0.0 {
@@ -74,7 +75,7 @@ fn shared_camera_row(row: &[f64], state: &FitState) -> [f64; CAMERA_COLUMNS] {
         } else {
             1.0
         };
-        out[0] += j[0] + aspect * j[1];
+        out[0] += j[0] + aspect * j[1] + ctx.k1_slope(m, intr.fx) * j[4];
         out[1] += j[2];
         out[2] += j[3];
     }
@@ -151,7 +152,7 @@ pub fn joint_information(
         else {
             continue;
         };
-        row.extend(shared_camera_row(&j, state));
+        row.extend(shared_camera_row(ctx, &j, state));
         let (shift, variance) = target::line_target(line, c.unwrap_or(at), ep);
         add_row(&mut h, &row, 1.0 / variance);
         if variance != ep.saturated_line_variance_px2 && shift.is_finite() {
@@ -173,7 +174,7 @@ pub fn joint_information(
                 return;
             }
             let mut full = r[..geometric].to_vec();
-            full.extend(shared_camera_row(&r[geometric..], state));
+            full.extend(shared_camera_row(ctx, &r[geometric..], state));
             add_row(&mut h, &full, w);
         });
     }

@@ -79,7 +79,7 @@ pub fn step(
     // set the damping of every intrinsic, and the principal points stayed where calibration
     // left them while the pose slid sideways (10 px behind the zoom; now within 3).
     let rig = match block {
-        Block::Cameras(m) if m > 1 => Some(shared_camera_increment(m)),
+        Block::Cameras(m) => Some(shared_camera_increment(ctx, state, m)),
         _ => None,
     };
     if let Some(p) = &rig {
@@ -92,7 +92,8 @@ pub fn step(
     // scales both alike; fitted apart, fy/fx wandered over 3 % on a 320×180 phantom). k1 is
     // barely seen by silhouettes, and left free it mimicked focal changes (k1 −1.3 against
     // +0.03 on a zoom in and out, issue 14): it follows fx by the scene's relation, or stays as
-    // calibrated. Their rows and columns go, so fx and the principal point are solved for
+    // calibrated. The increment's fx column already carries both (`shared_camera_increment`);
+    // the rows and columns of fy and k1 go, so fx and the principal point are solved for
     // without them.
     let holds_fy_k1 = matches!(block, Block::Cameras(_));
     if holds_fy_k1 {
@@ -164,14 +165,7 @@ pub fn step(
                 ctx.model.shape.pca.clamp_weights(&mut next.shape);
             }
             if holds_fy_k1 {
-                for (m, intr) in next.intrinsics.iter_mut().enumerate() {
-                    if let Some(cal) = ctx.cameras.get(m) {
-                        intr.fy = intr.fx * cal.intrinsics.fy / cal.intrinsics.fx;
-                    }
-                    if let Some(k1) = ctx.k1_at(m, intr.fx) {
-                        intr.k1 = k1;
-                    }
-                }
+                follow_fx(ctx, &mut next.intrinsics);
             }
             let (lines_energy, total) = objective(&next, None);
             if total < before {
@@ -280,10 +274,37 @@ fn add_priors<'a>(
 const FY: usize = 1;
 const K1: usize = 4;
 
+/// fy and k1 of every camera set from its fx: the calibrated aspect, the scene's k1-vs-focal
+/// relation (k1 held where the scene gives none).
+fn follow_fx(ctx: &FrameContext, intrinsics: &mut [crate::geometry::Intrinsics]) {
+    for (m, intr) in intrinsics.iter_mut().enumerate() {
+        intr.fy = intr.fx * ctx.calibrated_aspect(m);
+        if let Some(k1) = ctx.k1_at(m, intr.fx) {
+            intr.k1 = k1;
+        }
+    }
+}
+
 /// ∂(all cameras' intrinsics)/∂(shared increment): 5·cameras × 5, each camera's five
-/// parameters moving by the rig's one increment.
-fn shared_camera_increment(cameras: usize) -> DMatrix<f64> {
-    DMatrix::from_fn(5 * cameras, 5, |r, c| if r % 5 == c { 1.0 } else { 0.0 })
+/// parameters moving by the rig's one increment, where fy and k1 follow fx: fx's column moves
+/// each camera's fy by its calibrated aspect and its k1 by the scene's k1-vs-focal slope, and
+/// the columns of fy and k1 are zero. (Until 2026-12-06 fx's column moved fx alone, so a step
+/// and its equilibrium saw only the horizontal stretch of a zoom, while the step taken moved fy
+/// and k1 with it.)
+fn shared_camera_increment(ctx: &FrameContext, state: &FitState, cameras: usize) -> DMatrix<f64> {
+    DMatrix::from_fn(5 * cameras, 5, |r, c| {
+        let m = r / 5;
+        match (r % 5, c) {
+            (FY, 0) => ctx.calibrated_aspect(m),
+            (K1, 0) => state
+                .intrinsics
+                .get(m)
+                .map_or(0.0, |intr| ctx.k1_slope(m, intr.fx)),
+            (FY, _) | (K1, _) => 0.0,
+            (k, c) if k == c => 1.0,
+            _ => 0.0,
+        }
+    })
 }
 
 /// Fits one frame from `start`; `prev` anchors the damping. `params.correct_cameras` enables the π
@@ -430,5 +451,77 @@ pub fn fit_frame(
         iterations,
         lines: lines.len(),
         state,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fit::Model;
+    use crate::synth::{SynthOptions, memory_scene};
+
+    /// The shared increment's columns against central differences of every camera's five
+    /// corrected intrinsics as a step sets them (fy and k1 following fx): fx's column carries
+    /// fy's aspect and k1's slope, the principal point moves alone, fy's and k1's columns are
+    /// empty.
+    #[test]
+    fn shared_camera_increment_matches_central_differences_of_the_followed_intrinsics() {
+        let mut scene = memory_scene(&SynthOptions {
+            frames: 1,
+            width: 240,
+            height: 136,
+            ..SynthOptions::default()
+        })
+        .unwrap();
+        scene.k1_vs_focal = Some([0.02, -0.05, 0.03]);
+        scene.cameras[1].intrinsics.fy = scene.cameras[1].intrinsics.fx * 1.01;
+        let model = Model::build(&scene).unwrap();
+        let ctx = FrameContext::new(&model, &scene);
+        let mut start: Vec<_> = scene.cameras.iter().map(|c| c.intrinsics).collect();
+        for intr in &mut start {
+            intr.fx *= 1.07;
+        }
+        follow_fx(&ctx, &mut start);
+        let state = FitState {
+            affine: crate::geometry::Affine::IDENTITY,
+            shape: vec![0.0; model.shape.mode_count()],
+            intrinsics: start.clone(),
+        };
+        let m = scene.cameras.len();
+        let p = shared_camera_increment(&ctx, &state, m);
+        assert_eq!(p.shape(), (5 * m, 5));
+        for k in 0..5 {
+            let h = 1e-3;
+            let moved = |d: f64| {
+                let mut intr = start.clone();
+                for i in &mut intr {
+                    let mut v = i.corrected();
+                    v[k] += d;
+                    *i = i.with_corrected(v);
+                }
+                if k == 0 {
+                    follow_fx(&ctx, &mut intr);
+                }
+                intr
+            };
+            let (plus, minus) = (moved(h), moved(-h));
+            for c in 0..m {
+                for r in 0..5 {
+                    let fd = if k == FY || k == K1 {
+                        0.0
+                    } else {
+                        (plus[c].corrected()[r] - minus[c].corrected()[r]) / (2.0 * h)
+                    };
+                    let an = p[(5 * c + r, k)];
+                    assert!(
+                        (fd - an).abs() <= 1e-6 * (1.0 + fd.abs()),
+                        "camera {c}, parameter {r}, column {k}: central differences {fd}, increment {an}"
+                    );
+                }
+            }
+        }
+        // The scene's relation moves k1 with fx here: the column is not trivially zero.
+        assert!(p[(K1, 0)].abs() > 1e-7, "k1 slope {}", p[(K1, 0)]);
+        assert!((p[(5 + FY, 0)] - 1.01).abs() < 1e-9);
     }
 }

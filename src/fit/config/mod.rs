@@ -312,6 +312,8 @@ pub struct ZoomConfig {
     /// entangled with fy, cx, k1 and the pose: at 0.1 the focal length ended 6 % behind the
     /// zoom on seed 5; at 0.01 it tracks within 1 %.
     pub camera_damping_factor: f64,
+    /// The stereo term's weight is multiplied by this while the cameras are corrected.
+    pub cameras_stereo_weight_factor: f64,
     /// Pose damping factor inside a marked zoom without camera correction (R, L, LS): the
     /// affine stands in for the zoom. LS Dice on seeds 23 / 20 / 5: 0.914 / 0.941 / 0.938 at 1,
     /// 0.936 / 0.970 / 0.947 at 0.1, no better at 0.03.
@@ -339,6 +341,7 @@ impl Default for ZoomConfig {
             cameras_rebuild_every: 6,
             cameras_coarser_levels: 0,
             camera_damping_factor: 0.01,
+            cameras_stereo_weight_factor: 1.0,
             pose_only_damping_factor: 0.1,
             settle_frames: 3,
             onset_frames: 2,

@@ -111,6 +111,7 @@ impl FitConfig {
                 p.rounds = p.rounds.max(z.cameras_min_rounds);
                 p.rebuild_every = p.rebuild_every.min(z.cameras_rebuild_every);
                 p.priors.camera_damping *= z.camera_damping_factor;
+                p.stereo.weight *= z.cameras_stereo_weight_factor;
                 if phase == Phase::Tracked {
                     p.levels = (0..=z.cameras_coarser_levels)
                         .rev()

@@ -152,6 +152,10 @@ impl FitConfig {
             z.cameras_pose_damping_factor,
         )?;
         non_negative("zoom.cameras_shape_damping", z.cameras_shape_damping)?;
+        non_negative(
+            "zoom.cameras_stereo_weight_factor",
+            z.cameras_stereo_weight_factor,
+        )?;
         within("zoom.cameras_min_rounds", z.cameras_min_rounds, 0..=50)?;
         within(
             "zoom.cameras_rebuild_every",
