@@ -112,6 +112,51 @@ impl Grey {
     }
 }
 
+impl Grey {
+    /// The plane smoothed by a binomial kernel of `radius` (1: [1 2 1] / 4, 2: [1 4 6 4 1] / 16,
+    /// along each axis), edges clamped; itself at 0.
+    fn smoothed(self, radius: usize) -> Self {
+        if radius == 0 || self.width < 1 || self.height < 1 {
+            return self;
+        }
+        let n = 2 * radius;
+        let mut kernel = vec![1f32];
+        for _ in 0..n {
+            let mut next = vec![0f32; kernel.len() + 1];
+            for (i, k) in kernel.iter().enumerate() {
+                next[i] += 0.5 * k;
+                next[i + 1] += 0.5 * k;
+            }
+            kernel = next;
+        }
+        let (w, h) = (self.width as usize, self.height as usize);
+        // One multiply-add over a whole row per tap (the compiler vectorises these), edges
+        // clamped by padding each row and clamping the rows' indices.
+        let mut across = vec![0f32; w * h];
+        let mut padded = vec![0f32; w + n];
+        for (src, out) in self.data.chunks_exact(w).zip(across.chunks_exact_mut(w)) {
+            padded[..radius].fill(src[0]);
+            padded[radius..radius + w].copy_from_slice(src);
+            padded[radius + w..].fill(src[w - 1]);
+            for (j, &k) in kernel.iter().enumerate() {
+                for (o, v) in out.iter_mut().zip(&padded[j..j + w]) {
+                    *o += k * v;
+                }
+            }
+        }
+        let mut data = vec![0f32; w * h];
+        for (y, out) in data.chunks_exact_mut(w).enumerate() {
+            for (j, &k) in kernel.iter().enumerate() {
+                let sy = (y + j).saturating_sub(radius).min(h - 1);
+                for (o, v) in out.iter_mut().zip(&across[sy * w..(sy + 1) * w]) {
+                    *o += k * v;
+                }
+            }
+        }
+        Self { data, ..self }
+    }
+}
+
 /// Channel weights for matching: each channel's share of the tissue's squared mean colour,
 /// scaled to sum to 3 (so a grey level means what it meant for R + G + B). Texture is albedo
 /// times shading, so it is strongest in the tissue's dominant channel, while a specular
@@ -549,7 +594,10 @@ pub fn measure(
         &images[0],
         candidates.iter().map(|c| (c.2 as u32, c.3 as u32)),
     );
-    let images: Vec<Grey> = images.par_iter().map(|i| Grey::new(i, weights)).collect();
+    let images: Vec<Grey> = images
+        .par_iter()
+        .map(|i| Grey::new(i, weights).smoothed(params.smooth_radius >> level))
+        .collect();
     let work: Vec<_> = (1..views.len())
         .filter(|&m| {
             is_stereo_partner(
@@ -707,6 +755,48 @@ mod tests {
             off_model.abs() < 0.025,
             "warped on a 2 mm larger model: {off_model} px"
         );
+    }
+
+    /// The row-wise smoothing against the kernel applied pixel by pixel (binomial weights
+    /// C(2r, j) / 4^r, edges clamped), on a plane narrower and shorter than the kernel too.
+    #[test]
+    fn smoothing_matches_the_kernel_applied_pixel_by_pixel() {
+        let binomial = |n: usize, j: usize| -> f64 {
+            (0..j).fold(1.0, |c, i| c * (n - i) as f64 / (i + 1) as f64) / 2f64.powi(n as i32)
+        };
+        for (w, h) in [(23usize, 17usize), (3, 2), (1, 5)] {
+            let data: Vec<f32> = (0..w * h)
+                .map(|i| ((i * 7919) % 251) as f32 * 0.7 + (i % 3) as f32)
+                .collect();
+            for radius in [0usize, 1, 2, 3] {
+                let grey = Grey {
+                    width: w as i64,
+                    height: h as i64,
+                    data: data.clone(),
+                };
+                let out = grey.smoothed(radius);
+                let r = radius as i64;
+                for y in 0..h as i64 {
+                    for x in 0..w as i64 {
+                        let mut want = 0.0;
+                        for dy in -r..=r {
+                            for dx in -r..=r {
+                                let sx = (x + dx).clamp(0, w as i64 - 1) as usize;
+                                let sy = (y + dy).clamp(0, h as i64 - 1) as usize;
+                                want += binomial(2 * radius, (dx + r) as usize)
+                                    * binomial(2 * radius, (dy + r) as usize)
+                                    * data[sy * w + sx] as f64;
+                            }
+                        }
+                        let got = out.data[y as usize * w + x as usize] as f64;
+                        assert!(
+                            (got - want).abs() < 1e-3,
+                            "{w}x{h}, radius {radius}, ({x}, {y}): {got} against {want}"
+                        );
+                    }
+                }
+            }
+        }
     }
 
     #[test]
