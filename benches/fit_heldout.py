@@ -234,8 +234,9 @@ TUNING = [
     (2810, 480, 270, 0.10, 2, "case_00010", True),
     (2811, 960, 540, 0.10, 2, None, True),
     (2812, 480, 270, 0.03, 4, None, False),
-]
-TEST = [
+    # The thirteenth test set: run once on 2026-12-06 (twelfth session) with that session's
+    # final fit (fx's step carrying fy and k1; stereo matching on smoothed images), so it
+    # joined the tuning set; 3101-3112 were fixed the same day before anything else was run.
     (2901, 960, 540, 0.05, 2, None, True),
     (2902, 960, 540, 0.03, 2, "case_00010", True),
     (2903, 960, 540, 0.08, 2, None, False),
@@ -248,6 +249,20 @@ TEST = [
     (2910, 480, 270, 0.10, 2, "case_00003", True),
     (2911, 960, 540, 0.10, 2, None, True),
     (2912, 480, 270, 0.03, 4, None, False),
+]
+TEST = [
+    (3101, 960, 540, 0.05, 2, None, True),
+    (3102, 960, 540, 0.03, 2, "case_00023", True),
+    (3103, 960, 540, 0.08, 2, None, False),
+    (3104, 480, 270, 0.10, 2, None, True),
+    (3105, 480, 270, 0.03, 2, "case_00170", True),
+    (3106, 480, 270, 0.05, 2, None, True),
+    (3107, 480, 270, 0.08, 2, "case_00003", False),
+    (3108, 480, 270, 0.05, 4, None, True),
+    (3109, 960, 540, 0.02, 2, None, True),
+    (3110, 480, 270, 0.10, 2, "case_00010", True),
+    (3111, 960, 540, 0.10, 2, None, True),
+    (3112, 480, 270, 0.03, 4, None, False),
 ]
 FRAMES = 40
 
