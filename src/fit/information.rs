@@ -59,8 +59,8 @@ impl Information {
 }
 
 /// A camera block row (five per camera) as the rig's shared fx, cx, cy move it: every camera
-/// by the same increment, fy by the increment times the camera's aspect fy/fx and k1 by the
-/// scene's k1-vs-focal slope (as the optimizer's step moves them).
+/// by the same increment, fy by the increment times the camera's calibrated aspect fy/fx and k1
+/// by the scene's k1-vs-focal slope (as the optimizer's step moves them).
 fn shared_camera_row(ctx: &FrameContext, row: &[f64], state: &FitState) -> [f64; CAMERA_COLUMNS] {
     let mut out = [0.0; CAMERA_COLUMNS];
     for (m, j) in row.chunks(5).enumerate() {
@@ -70,12 +70,7 @@ fn shared_camera_row(ctx: &FrameContext, row: &[f64], state: &FitState) -> [f64;
         if j.len() < 5 {
             break;
         }
-        let aspect = if intr.fx.abs() > 0.0 {
-            intr.fy / intr.fx
-        } else {
-            1.0
-        };
-        out[0] += j[0] + aspect * j[1] + ctx.k1_slope(m, intr.fx) * j[4];
+        out[0] += j[0] + ctx.calibrated_aspect(m) * j[1] + ctx.k1_slope(m, intr.fx) * j[4];
         out[1] += j[2];
         out[2] += j[3];
     }

@@ -110,9 +110,7 @@ impl Grey {
                 .collect(),
         }
     }
-}
 
-impl Grey {
     /// The plane smoothed by a binomial kernel of `radius` (1: [1 2 1] / 4, 2: [1 4 6 4 1] / 16,
     /// along each axis), edges clamped; itself at 0.
     fn smoothed(self, radius: usize) -> Self {
