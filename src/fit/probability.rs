@@ -225,6 +225,10 @@ impl ViewProbabilities {
             let (rx0, ry0) = (x0.saturating_sub(margin), y0.saturating_sub(margin));
             let (rx1, ry1) = ((x1 + margin).min(iw - 1), (y1 + margin).min(ih - 1));
             lv.region = Some((rx0, ry0, rx1 + 1 - rx0, ry1 + 1 - ry0));
+            super::profile::count(
+                super::profile::Count::FeaturePixels,
+                (rx1 + 1 - rx0) * (ry1 + 1 - ry0),
+            );
             lv.features = Some(super::profile::time(
                 super::profile::Phase::Features,
                 || FrameFeatures::region(&image, level, rx0, ry0, rx1 + 1 - rx0, ry1 + 1 - ry0),
@@ -234,6 +238,7 @@ impl ViewProbabilities {
             return;
         };
         let coords: Vec<(u32, u32)> = missing.iter().map(|&i| (i % w, i / w)).collect();
+        super::profile::count(super::profile::Count::ClassifiedPixels, coords.len());
         let p = super::profile::time(super::profile::Phase::Forest, || {
             appearance.classify_pixels(features, &coords)
         });

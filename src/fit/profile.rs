@@ -93,6 +93,51 @@ pub fn add(phase: Phase, elapsed: std::time::Duration) {
     NANOS[phase as usize].fetch_add(elapsed.as_nanos() as u64, Ordering::Relaxed);
 }
 
+/// Work counted per tracked frame, beside the phases' times (what a phase's time is for).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Count {
+    /// Pixels whose feature planes were prepared (the regions' areas, every view).
+    FeaturePixels,
+    /// Pixels the forest classified (every view).
+    ClassifiedPixels,
+    /// Correspondence line builds.
+    LineBuilds,
+}
+
+static COUNTS: [AtomicU64; 3] = [const { AtomicU64::new(0) }; 3];
+
+/// Adds `n` to a per-frame count when profiling is on.
+pub fn count(what: Count, n: usize) {
+    if enabled() {
+        COUNTS[what as usize].fetch_add(n as u64, Ordering::Relaxed);
+    }
+}
+
+/// CPU time (ns) of every thread of the process, from the kernel's per-thread scheduler
+/// statistics (Linux; 0 elsewhere): with the wall time it says how well a frame uses the cores.
+fn process_cpu_ns() -> u64 {
+    let Ok(tasks) = std::fs::read_dir("/proc/self/task") else {
+        return 0;
+    };
+    tasks
+        .flatten()
+        .filter_map(|t| std::fs::read_to_string(t.path().join("schedstat")).ok())
+        .filter_map(|s| s.split_whitespace().next()?.parse::<u64>().ok())
+        .sum()
+}
+
+/// The process's CPU time when the current frame started.
+static FRAME_CPU_START: AtomicU64 = AtomicU64::new(0);
+/// CPU time of the tracked frames' fits, every thread.
+static FRAME_CPU: AtomicU64 = AtomicU64::new(0);
+
+/// Marks the start of a frame's fit (for its CPU time).
+pub fn frame_started() {
+    if enabled() {
+        FRAME_CPU_START.store(process_cpu_ns(), Ordering::Relaxed);
+    }
+}
+
 /// Correspondence lines of the tracked frames' final states (how much work a frame is: the
 /// line count follows the rim's length and the mesh's density).
 static LINES: AtomicU64 = AtomicU64::new(0);
@@ -102,12 +147,15 @@ static LINES: AtomicU64 = AtomicU64::new(0);
 /// of tracked frames only.
 pub fn frame_done(first: bool, elapsed: std::time::Duration, lines: usize) {
     if first {
-        for n in &NANOS {
+        for n in NANOS.iter().chain(&COUNTS) {
             n.store(0, Ordering::Relaxed);
         }
         FRAMES.store(0, Ordering::Relaxed);
         LINES.store(0, Ordering::Relaxed);
+        FRAME_CPU.store(0, Ordering::Relaxed);
     } else if enabled() {
+        let cpu = process_cpu_ns().saturating_sub(FRAME_CPU_START.load(Ordering::Relaxed));
+        FRAME_CPU.fetch_add(cpu, Ordering::Relaxed);
         add(Phase::Frame, elapsed);
         FRAMES.fetch_add(1, Ordering::Relaxed);
         LINES.fetch_add(lines as u64, Ordering::Relaxed);
@@ -127,8 +175,14 @@ pub fn report() -> Option<String> {
         })
         .collect();
     let lines = LINES.load(Ordering::Relaxed) as f64 / n;
+    let per_frame = |c: Count| COUNTS[c as usize].load(Ordering::Relaxed) as f64 / n;
     Some(format!(
-        "ms per tracked frame: {}; {lines:.0} lines per frame",
-        parts.join(", ")
+        "ms per tracked frame: {}, CPU of all threads {:.1}; per frame: {lines:.0} lines, {:.1} line builds, {:.0} feature \
+         pixels, {:.0} classified pixels",
+        parts.join(", "),
+        FRAME_CPU.load(Ordering::Relaxed) as f64 / 1e6 / n,
+        per_frame(Count::LineBuilds),
+        per_frame(Count::FeaturePixels),
+        per_frame(Count::ClassifiedPixels),
     ))
 }

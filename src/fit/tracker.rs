@@ -610,6 +610,7 @@ pub fn track(
             .map(|c| scene.frame(c, t))
             .collect::<Result<_, _>>()?;
         let started = std::time::Instant::now();
+        super::profile::frame_started();
         // Levels 0 to the coarsest the first frame starts at.
         let levels = options.fit_level() + options.config.first_frame.coarser_levels + 1;
         let mut views: Vec<ViewProbabilities> =

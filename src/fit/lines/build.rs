@@ -35,6 +35,7 @@ impl FrameContext<'_> {
         appearance: Option<&Appearance>,
         params: &EnergyParams,
     ) -> (Vec<Line>, Vec<ViewRaster>) {
+        crate::fit::profile::count(crate::fit::profile::Count::LineBuilds, 1);
         let deformed = self.model.deformed(&state.shape);
         let posed = self.model.posed(&state.affine, &deformed);
         let visible = self.imaged();
