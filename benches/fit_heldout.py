@@ -249,8 +249,9 @@ TUNING = [
     (2910, 480, 270, 0.10, 2, "case_00003", True),
     (2911, 960, 540, 0.10, 2, None, True),
     (2912, 480, 270, 0.03, 4, None, False),
-]
-TEST = [
+    # The fourteenth: run once on 2026-12-06 (thirteenth session) with the fit unchanged from
+    # the twelfth (LSC Dice 0.951, hidden 1.76 / 5.37 mm, fx 0.98 %, k1 0.027), so it joined
+    # the tuning set; 3301-3312 were fixed the same day before anything else was run.
     (3101, 960, 540, 0.05, 2, None, True),
     (3102, 960, 540, 0.03, 2, "case_00023", True),
     (3103, 960, 540, 0.08, 2, None, False),
@@ -263,6 +264,20 @@ TEST = [
     (3110, 480, 270, 0.10, 2, "case_00010", True),
     (3111, 960, 540, 0.10, 2, None, True),
     (3112, 480, 270, 0.03, 4, None, False),
+]
+TEST = [
+    (3301, 960, 540, 0.05, 2, None, True),
+    (3302, 960, 540, 0.03, 2, "case_00003", True),
+    (3303, 960, 540, 0.08, 2, None, False),
+    (3304, 480, 270, 0.10, 2, None, True),
+    (3305, 480, 270, 0.03, 2, "case_00010", True),
+    (3306, 480, 270, 0.05, 2, None, True),
+    (3307, 480, 270, 0.08, 2, "case_00023", False),
+    (3308, 480, 270, 0.05, 4, None, True),
+    (3309, 960, 540, 0.02, 2, None, True),
+    (3310, 480, 270, 0.10, 2, "case_00170", True),
+    (3311, 960, 540, 0.10, 2, None, True),
+    (3312, 480, 270, 0.03, 4, None, False),
 ]
 FRAMES = 40
 

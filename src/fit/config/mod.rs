@@ -445,6 +445,10 @@ pub struct PlacementConfig {
     ///
     /// Each one refined costs a rigid coarse fit, 20–60 ms at 960×540.
     pub refined: usize,
+    /// The most confident refined hypothesis turned by ± this (degrees) about each camera axis
+    /// and refined again (six more fits; 0: none). Only where a run starts: a fresh placement
+    /// after lost frames, which the video waits for, skips it.
+    pub polish_deg: f64,
     /// Fewer foreground pixels than this (at the scoring level) and the organ is not found.
     pub min_area_px: f64,
     /// Depth a hypothesis is rendered at to learn its projected area (mm); the depth it is
@@ -467,6 +471,7 @@ impl Default for PlacementConfig {
             directions: 26,
             rolls: 8,
             refined: 12,
+            polish_deg: 0.0,
             min_area_px: 20.0,
             reference_depth_mm: 200.0,
             levels: vec![2, 1, 0],
