@@ -73,6 +73,16 @@ fn soft_iou(prob: &Plane<f32>, silhouette: &Plane<bool>) -> f64 {
     inter / (sp + ss - inter).max(1e-9)
 }
 
+/// `affine` followed by the rotation `turn` (axis × angle, camera coordinates) about the
+/// camera-space point `centre`.
+fn turned_about(affine: &Affine, centre: DVec3, turn: DVec3) -> Affine {
+    let r = rotation_from_vector(turn);
+    Affine::from_linear_translation(
+        r * affine.linear(),
+        r * affine.translation_mm() + (centre - r * centre),
+    )
+}
+
 /// Estimates the pose of frame `t` from the forest alone, with `config.placement`.
 pub fn automatic_pose(
     scene: &Scene,
@@ -212,15 +222,10 @@ pub fn automatic_pose(
         && let Some((_, winner)) = best
     {
         let centre = winner.apply(centre_pre);
-        let (linear, translation) = (winner.linear(), winner.translation_mm());
         for axis in [DVec3::X, DVec3::Y, DVec3::Z] {
             for sign in [-1.0, 1.0] {
-                let turn = rotation_from_vector(axis * (sign * placement.polish_deg.to_radians()));
-                let turned = Affine::from_linear_translation(
-                    turn * linear,
-                    turn * translation + (centre - turn * centre),
-                );
-                refine(turned, &mut best);
+                let turn = axis * (sign * placement.polish_deg.to_radians());
+                refine(turned_about(&winner, centre, turn), &mut best);
             }
         }
     }
@@ -231,4 +236,38 @@ pub fn automatic_pose(
         )
         .into()
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::pose::rotation_to_vector;
+
+    /// A polishing turn keeps the model's centre where it was, turns the pose by exactly the
+    /// angle asked about the axis asked, and leaves its scale and shear alone.
+    #[test]
+    fn a_polishing_turn_rotates_about_the_centre_by_the_angle_asked() {
+        let linear = rotation_from_vector(DVec3::new(0.3, -0.5, 0.2))
+            * DMat3::from_diagonal(DVec3::new(1.05, 0.97, 1.01));
+        let affine = Affine::from_linear_translation(linear, DVec3::new(4.0, -3.0, 150.0));
+        let centre_pre = DVec3::new(2.0, 1.0, -5.0);
+        let centre = affine.apply(centre_pre);
+        for turn in [
+            DVec3::X * 20f64.to_radians(),
+            DVec3::Y * -20f64.to_radians(),
+            DVec3::Z * 35f64.to_radians(),
+        ] {
+            let turned = turned_about(&affine, centre, turn);
+            assert!((turned.apply(centre_pre) - centre).length() < 1e-9);
+            // The turn between the two poses, read back from any point pair.
+            let relative = turned.linear() * affine.linear().inverse();
+            assert!(
+                (rotation_to_vector(relative) - turn).length() < 1e-9,
+                "{turn}"
+            );
+            let p = DVec3::new(-7.0, 9.0, 3.0);
+            let (a, b) = (affine.apply(p), turned.apply(p));
+            assert!(((b - centre).length() - (a - centre).length()).abs() < 1e-9);
+        }
+    }
 }
