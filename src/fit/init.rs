@@ -2,7 +2,9 @@
 //! maps of the first frame locate the organ (centroid and area in every view); orientation
 //! hypotheses (26 view directions × 8 rolls) are placed on the centroid's ray at the depth their
 //! silhouette area implies and scored by soft overlap with the forest's foreground in all views;
-//! the best few are refined by a coarse rigid fit and the most confident, per structure, wins.
+//! the best few are refined by a coarse rigid fit and the most confident, per structure, wins;
+//! where a run starts, the winner is also turned ±20° about each camera axis and refined again
+//! (the refinement can stop short of the truth as a kidney turns about its long axis).
 //! The paper needed a rough manual placement; this needs none.
 
 use super::config::{FitConfig, Mode, Phase, Zoom};
