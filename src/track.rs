@@ -160,7 +160,14 @@ pub fn run_timed(
     let model = Model::build(scene)?;
     let affine = match scene.initial_pose {
         Some(a) => a,
-        None => crate::fit::init::automatic_pose(scene, &model, &appearance, config, frames.0)?,
+        None => crate::fit::init::automatic_pose(
+            scene,
+            &model,
+            &appearance,
+            config,
+            frames.0,
+            crate::fit::init::Placing::Start,
+        )?,
     };
     let start = initial_state(scene, &model, affine);
     let options =

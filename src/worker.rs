@@ -385,6 +385,7 @@ fn run(
                 &appearance,
                 &state.config,
                 frame,
+                crate::fit::init::Placing::Start,
             )?;
             emit(out, Event::Initialised(affine))?;
         }
@@ -415,6 +416,7 @@ fn run(
                     &appearance,
                     &state.config,
                     frames.0,
+                    crate::fit::init::Placing::Start,
                 )?,
             };
             let options = TrackOptions::new(mode, frames, scene.cameras[0].width)

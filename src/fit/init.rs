@@ -85,6 +85,15 @@ fn turned_about(affine: &Affine, centre: DVec3, turn: DVec3) -> Affine {
     )
 }
 
+/// What a placement is for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Placing {
+    /// The pose a run starts from: the winner is polished (`PlacementConfig::polish_deg`).
+    Start,
+    /// A fresh placement after lost frames, which the video waits for: no polishing.
+    Recovery,
+}
+
 /// Estimates the pose of frame `t` from the forest alone, with `config.placement`.
 pub fn automatic_pose(
     scene: &Scene,
@@ -92,6 +101,7 @@ pub fn automatic_pose(
     appearance: &Appearance,
     config: &FitConfig,
     t: usize,
+    placing: Placing,
 ) -> Result<Affine, Error> {
     let placement = &config.placement;
     let frames: Vec<Arc<image::RgbImage>> = (0..scene.cameras.len())
@@ -220,7 +230,8 @@ pub fn automatic_pose(
     // The refinement can stop 15–30° from the truth (a kidney's outline changes little as it
     // turns about its long axis): the winner turned by ± `polish_deg` about each of camera
     // 0's axes, through the model's centre, is refined too.
-    if placement.polish_deg > 0.0
+    if placing == Placing::Start
+        && placement.polish_deg > 0.0
         && let Some((_, winner)) = best
     {
         let centre = winner.apply(centre_pre);

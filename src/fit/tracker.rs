@@ -529,15 +529,13 @@ impl<'a> FrameTracker<'a> {
         {
             return (fit, true);
         }
-        // The video waits for a fresh placement: no polishing turns (`polish_deg`).
-        let mut recovery = config.clone();
-        recovery.placement.polish_deg = 0.0;
         let affine = match super::init::automatic_pose(
             self.scene,
             self.ctx.model,
             self.appearance,
-            &recovery,
+            config,
             t,
+            super::init::Placing::Recovery,
         ) {
             Ok(affine) => affine,
             Err(e) => {

@@ -446,8 +446,9 @@ pub struct PlacementConfig {
     /// Each one refined costs a rigid coarse fit, 20–60 ms at 960×540.
     pub refined: usize,
     /// The most confident refined hypothesis turned by ± this (degrees) about each camera axis
-    /// and refined again (six more fits; 0: none). Only where a run starts: a fresh placement
-    /// after lost frames, which the video waits for, skips it. The refinement had stopped
+    /// and refined again (six more fits; 0: none). Only where a run starts
+    /// (`fit::init::Placing::Start`): a fresh placement after lost frames, which the video
+    /// waits for, skips it. The refinement had stopped
     /// 13–30° from the truth on 27 of the 162 tuning scenes of `benches/fit_heldout.py`
     /// (a kidney's outline changes little as it turns about its long axis). Measured there
     /// without `initial_pose` (LSC, frame 0; 2026-12-06, thirteenth session), 0 / 20°: mean
