@@ -159,7 +159,9 @@ pub fn run_timed(
     );
     let model = Model::build(scene)?;
     let affine = match scene.initial_pose {
-        Some(a) => a,
+        Some(a) => {
+            crate::fit::init::polished_pose(scene, &model, &appearance, config, frames.0, a)?
+        }
         None => crate::fit::init::automatic_pose(
             scene,
             &model,

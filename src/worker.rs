@@ -408,7 +408,18 @@ fn run(
                 ));
             }
             let model = need_model(state)?;
+            // The scene's own pose (the app starts from it until a fit or a placement
+            // replaces it) is polished as `endofuse track` polishes it; a fit or a placement
+            // is taken as it is.
             let affine = match start.or(scene.initial_pose) {
+                Some(a) if Some(a) == scene.initial_pose => crate::fit::init::polished_pose(
+                    &scene,
+                    &model,
+                    &appearance,
+                    &state.config,
+                    frames.0,
+                    a,
+                )?,
                 Some(a) => a,
                 None => crate::fit::init::automatic_pose(
                     &scene,

@@ -470,3 +470,87 @@ fn a_run_is_reproduced_from_its_metrics_and_its_config_is_honoured() {
     let err = String::from_utf8_lossy(&run.stderr);
     assert!(err.contains("placement.levels"), "{err}");
 }
+
+/// The rotation part of a trajectory's 12-number affine (row-major linear part, then the
+/// translation), by polar decomposition: the fitted affine scales and shears a little.
+fn rotation_of(affine: &serde_json::Value) -> glam::DMat3 {
+    let q: Vec<f64> = affine
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    let mut r = glam::DMat3::from_cols_array(&[q[0], q[1], q[2], q[3], q[4], q[5], q[6], q[7], q[8]])
+        .transpose();
+    for _ in 0..30 {
+        r = (r + r.inverse().transpose()) * 0.5;
+    }
+    r
+}
+
+/// Degrees between two rotations.
+fn degrees_between(a: glam::DMat3, b: glam::DMat3) -> f64 {
+    let m = a * b.transpose();
+    let cos = ((m.x_axis.x + m.y_axis.y + m.z_axis.z - 1.0) / 2.0).clamp(-1.0, 1.0);
+    cos.acos().to_degrees()
+}
+
+/// A given `initial_pose` 12° off about the camera's x axis (through the kidney's centre) ends
+/// in a basin of its own when it is fitted as it is; turned by ±10° about each camera axis
+/// and refined beside itself (`placement.initial_polish_deg`), the most confident start is
+/// nearer the truth. Measured on this phantom: frame 0 6.2° from the truth unpolished, 4.1°
+/// polished.
+#[test]
+fn a_given_pose_in_a_wrong_basin_is_polished_towards_the_truth() {
+    let scene = synth("polish", &[]);
+    let truth = json(&scene.join("gt/trajectory.json"))["frames"][0].clone();
+    let r_true = rotation_of(&truth["affine"]);
+    let centre: Vec<f64> = truth["centroids"]["kidney"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    let centre = glam::DVec3::from_slice(&centre);
+    let q: Vec<f64> = truth["affine"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    let turn = glam::DMat3::from_axis_angle(glam::DVec3::X, 12f64.to_radians());
+    let linear = glam::DMat3::from_cols_array(&q[..9].try_into().unwrap()).transpose();
+    let (linear, t) = (turn * linear, glam::DVec3::from_slice(&q[9..12]));
+    let t = turn * t + centre - turn * centre;
+    let rows = linear.transpose().to_cols_array();
+    let given: Vec<f64> = rows.iter().copied().chain([t.x, t.y, t.z]).collect();
+    common::edit_json(&scene, |s| {
+        s["initial_pose"] = serde_json::json!({ "affine": given });
+    });
+    let frame0_error = |polish_deg: f64, tag: &str| {
+        let config = tmp(&format!("polish-{tag}")).with_extension("json");
+        std::fs::create_dir_all(config.parent().unwrap()).unwrap();
+        std::fs::write(
+            &config,
+            format!(r#"{{"placement": {{"initial_polish_deg": {polish_deg}}}}}"#),
+        )
+        .unwrap();
+        let out = tmp(&format!("polish-{tag}-out"));
+        track_ok(
+            &scene,
+            &out,
+            &["--frames", "0..0", "--config", config.to_str().unwrap()],
+        );
+        let fitted = json(&out.join("trajectory.json"))["frames"][0]["affine"].clone();
+        let _ = std::fs::remove_dir_all(&out);
+        degrees_between(rotation_of(&fitted), r_true)
+    };
+    let start = degrees_between(rotation_of(&serde_json::json!(given)), r_true);
+    assert!((start - 12.0).abs() < 1e-6, "the start is 12° off: {start}");
+    let (plain, polished) = (frame0_error(0.0, "plain"), frame0_error(10.0, "polished"));
+    assert!(
+        polished < plain - 1.0 && polished < 5.5,
+        "frame 0 {plain:.2}° off unpolished, {polished:.2}° polished"
+    );
+    let _ = std::fs::remove_dir_all(&scene);
+}

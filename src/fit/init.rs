@@ -5,7 +5,9 @@
 //! the best few are refined by a coarse rigid fit and the most confident, per structure, wins;
 //! where a run starts, the winner is also turned ±20° about each camera axis and refined again
 //! (the refinement can stop short of the truth as a kidney turns about its long axis).
-//! The paper needed a rough manual placement; this needs none.
+//! The paper needed a rough manual placement; this needs none. A pose a scene gives is
+//! polished the same way before its first frame is fitted ([`polished_pose`]): from 10° off,
+//! the fit can settle in a basin of its own several degrees from the truth.
 
 use super::config::{FitConfig, Mode, Phase, Zoom};
 use super::context::FrameContext;
@@ -187,68 +189,159 @@ pub fn automatic_pose(
     }
     scored.sort_by(|a, b| b.0.total_cmp(&a.0));
     // Refine the best few rigidly at coarse levels; keep the most confident.
-    let ctx = FrameContext::new(model, scene);
-    let params = config.resolve(Mode::R, Phase::Placement, Zoom::Off, 0);
-    let pyramid = params.levels.iter().max().map_or(1, |l| l + 1);
-    let mut best: Option<(f64, Affine)> = None;
-    // One set of views for every candidate: a pixel's probabilities depend neither on the
-    // pose asking for them nor on the region its features were computed over
-    // (`FrameFeatures::valid`), so each candidate reuses what the others classified.
-    let mut views: Vec<ViewProbabilities> = frames
-        .iter()
-        .map(|f| ViewProbabilities::new(f.clone(), pyramid, classes.len()))
-        .collect();
-    let mut refine = |affine: Affine, best: &mut Option<(f64, Affine)>| {
-        let start = FitState {
-            affine,
-            shape: vec![0.0; model.shape.mode_count()],
-            intrinsics: scene.cameras.iter().map(|c| c.intrinsics).collect(),
-        };
-        let fit = fit_frame(&ctx, &start, &start, &mut views, Some(appearance), &params);
-        log::debug!(
-            "placement candidate: confidence {:.3} (per structure {:.3}), overlap {:.3}, energy \
-             {:.1}, affine {:?}",
-            fit.confidence,
-            fit.structure_confidence,
-            score(&rasters(&fit.state.affine, &cams)),
-            fit.energy,
-            fit.state.affine
-        );
-        // Per structure: over all lines the kidney's outline outvotes the small tumour, and a
-        // mirror image whose outline fits a little better won (a 320×180 phantom: confidence
-        // 0.734 against 0.709, tumour Dice 0).
-        if best
-            .as_ref()
-            .is_none_or(|(c, _)| fit.structure_confidence > *c)
-        {
-            *best = Some((fit.structure_confidence, fit.state.affine));
-        }
-    };
+    let mut refiner = Refiner::new(scene, model, appearance, config, &frames, classes.len());
     for (_, affine) in scored.into_iter().take(placement.refined) {
-        refine(affine, &mut best);
+        refiner.refine(affine);
     }
     // The refinement can stop 15–30° from the truth (a kidney's outline changes little as it
     // turns about its long axis): the winner turned by ± `polish_deg` about each of camera
     // 0's axes, through the model's centre, is refined too.
-    if placing == Placing::Start
-        && placement.polish_deg > 0.0
-        && let Some((_, winner)) = best
-    {
-        let centre = winner.apply(centre_pre);
-        for axis in [DVec3::X, DVec3::Y, DVec3::Z] {
-            for sign in [-1.0, 1.0] {
-                let turn = axis * (sign * placement.polish_deg.to_radians());
-                refine(turned_about(&winner, centre, turn), &mut best);
-            }
-        }
+    if placing == Placing::Start {
+        refiner.polish(centre_pre, placement.polish_deg);
     }
-    best.map(|(_, a)| a).ok_or_else(|| {
+    refiner.best.map(|b| b.refined).ok_or_else(|| {
         InputError::new(
             &scene.origin,
             format!("no orientation of the model fits frame {t}: give an initial_pose"),
         )
         .into()
     })
+}
+
+/// A pose a run is given (the scene's `initial_pose`, or one placed in the app) refined as the
+/// placement refines its hypotheses, beside the same pose turned by ±
+/// `placement.initial_polish_deg` about each of camera 0's axes through the model's centre
+/// and refined again; the most confident, per structure, wins. A pose 10° off can stop as far off, where a turn
+/// about an axis the outline barely sees leaves the lines in a basin of their own.
+pub fn polished_pose(
+    scene: &Scene,
+    model: &Model,
+    appearance: &Appearance,
+    config: &FitConfig,
+    t: usize,
+    start: Affine,
+) -> Result<Affine, Error> {
+    let degrees = config.placement.initial_polish_deg;
+    if degrees <= 0.0 {
+        return Ok(start);
+    }
+    let frames: Vec<Arc<image::RgbImage>> = (0..scene.cameras.len())
+        .map(|c| scene.frame(c, t))
+        .collect::<Result<_, _>>()?;
+    let classes = ClassMap::from_scene(scene);
+    let mean = model.deformed(&vec![0.0; model.shape.mode_count()]);
+    let centre_pre = crate::geometry::mesh::vertex_mean(&mean[model.anchor]);
+    let mut refiner = Refiner::new(scene, model, appearance, config, &frames, classes.len());
+    refiner.refine(start);
+    refiner.polish(centre_pre, degrees);
+    // The given pose, where no turn of it was more confident: the full fit of the first frame
+    // starts from it, as it would unpolished (the coarse rigid fit can move a good pose a few
+    // degrees the wrong way).
+    Ok(match refiner.best {
+        Some(b) if b.start != start => b.refined,
+        _ => start,
+    })
+}
+
+/// The most confident pose a [`Refiner`] has seen.
+#[derive(Debug, Clone, Copy)]
+struct Refined {
+    /// Per structure (see [`super::optimizer::FrameFit::structure_confidence`]).
+    confidence: f64,
+    start: Affine,
+    refined: Affine,
+}
+
+/// Refines poses by the placement's coarse rigid fit on one frame and keeps the most
+/// confident, per structure. One set of views serves every pose: a pixel's probabilities
+/// depend neither on the pose asking for them nor on the region its features were computed
+/// over (`FrameFeatures::valid`), so each pose reuses what the others classified.
+struct Refiner<'a> {
+    ctx: FrameContext<'a>,
+    model: &'a Model,
+    appearance: &'a Appearance,
+    params: super::config::FitParams,
+    views: Vec<ViewProbabilities>,
+    intrinsics: Vec<crate::geometry::camera::Intrinsics>,
+    best: Option<Refined>,
+}
+
+impl<'a> Refiner<'a> {
+    fn new(
+        scene: &'a Scene,
+        model: &'a Model,
+        appearance: &'a Appearance,
+        config: &FitConfig,
+        frames: &[Arc<image::RgbImage>],
+        classes: usize,
+    ) -> Self {
+        let params = config.resolve(Mode::R, Phase::Placement, Zoom::Off, 0);
+        let pyramid = params.levels.iter().max().map_or(1, |l| l + 1);
+        Refiner {
+            ctx: FrameContext::new(model, scene),
+            model,
+            appearance,
+            views: frames
+                .iter()
+                .map(|f| ViewProbabilities::new(f.clone(), pyramid, classes))
+                .collect(),
+            params,
+            intrinsics: scene.cameras.iter().map(|c| c.intrinsics).collect(),
+            best: None,
+        }
+    }
+
+    fn refine(&mut self, affine: Affine) {
+        let start = FitState {
+            affine,
+            shape: vec![0.0; self.model.shape.mode_count()],
+            intrinsics: self.intrinsics.clone(),
+        };
+        let fit = fit_frame(
+            &self.ctx,
+            &start,
+            &start,
+            &mut self.views,
+            Some(self.appearance),
+            &self.params,
+        );
+        log::debug!(
+            "placement candidate: confidence {:.3} (per structure {:.3}), energy {:.1}, affine \
+             {:?}",
+            fit.confidence,
+            fit.structure_confidence,
+            fit.energy,
+            fit.state.affine
+        );
+        // Per structure: over all lines the kidney's outline outvotes the small tumour, and a
+        // mirror image whose outline fits a little better won (a 320×180 phantom: confidence
+        // 0.734 against 0.709, tumour Dice 0).
+        if self
+            .best
+            .is_none_or(|b| fit.structure_confidence > b.confidence)
+        {
+            self.best = Some(Refined {
+                confidence: fit.structure_confidence,
+                start: affine,
+                refined: fit.state.affine,
+            });
+        }
+    }
+
+    /// The most confident pose so far turned by ±`degrees` about each of camera 0's axes,
+    /// through the model's centre (`centre_pre`, preoperative mm), each refined in turn.
+    fn polish(&mut self, centre_pre: DVec3, degrees: f64) {
+        let Some(winner) = self.best.filter(|_| degrees > 0.0).map(|b| b.refined) else {
+            return;
+        };
+        let centre = winner.apply(centre_pre);
+        for axis in [DVec3::X, DVec3::Y, DVec3::Z] {
+            for sign in [-1.0, 1.0] {
+                let turn = axis * (sign * degrees.to_radians());
+                self.refine(turned_about(&winner, centre, turn));
+            }
+        }
+    }
 }
 
 #[cfg(test)]

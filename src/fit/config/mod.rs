@@ -457,6 +457,10 @@ pub struct PlacementConfig {
     /// 0.025. Three polishing rounds (again around a new winner) and 30° changed nothing on
     /// the 96 / 44 scenes they were run on.
     pub polish_deg: f64,
+    /// A pose a run is given (`initial_pose`, or one placed in the app) is refined as the
+    /// hypotheses are, beside itself turned by ± this (degrees) about each camera axis (seven
+    /// fits; 0: the given pose is fitted as it is; `fit::init::polished_pose`).
+    pub initial_polish_deg: f64,
     /// Fewer foreground pixels than this (at the scoring level) and the organ is not found.
     pub min_area_px: f64,
     /// Depth a hypothesis is rendered at to learn its projected area (mm); the depth it is
@@ -480,6 +484,7 @@ impl Default for PlacementConfig {
             rolls: 8,
             refined: 12,
             polish_deg: 20.0,
+            initial_polish_deg: 10.0,
             min_area_px: 20.0,
             reference_depth_mm: 200.0,
             levels: vec![2, 1, 0],
@@ -588,6 +593,24 @@ mod tests {
                 frames: Some((3, 9)),
             }
         );
+        // A run recorded before a knob existed ran without it: its metrics.json reads as the
+        // knob's value then, a configuration file of one's own as today's default.
+        let mut before = serde_json::to_value(&resolved).unwrap();
+        let placement = before["fit"]["placement"].as_object_mut().unwrap();
+        placement.remove("polish_deg");
+        placement.remove("initial_polish_deg");
+        let metrics = serde_json::json!({ "mode": "LSC", "timing": {}, "config": before });
+        let run = RecordedRun::from_json(&metrics.to_string()).unwrap();
+        assert_eq!(
+            (run.config.placement.polish_deg, run.config.placement.initial_polish_deg),
+            (0.0, 0.0)
+        );
+        assert_eq!(run.config.placement.refined, c.placement.refined);
+        let mut without = serde_json::to_value(&run.config).unwrap();
+        without["placement"].as_object_mut().unwrap().remove("polish_deg");
+        let own = RecordedRun::from_json(&without.to_string()).unwrap();
+        assert_eq!(own.config.placement.polish_deg, c.placement.polish_deg);
+        assert!(c.placement.polish_deg > 0.0 && c.placement.initial_polish_deg > 0.0);
         // A metrics file without one says so.
         let old = serde_json::json!({ "mode": "LS", "timing": {}, "camera": {} });
         assert!(matches!(

@@ -179,6 +179,17 @@ pub enum ConfigFileError {
     NoConfig,
 }
 
+/// Knobs added after runs began to record their configuration, with the value that does what
+/// the fit did before each existed: a run's metrics.json that lacks one ran without it, so it
+/// is read as that value, not as today's default (which a configuration file of one's own
+/// still gets). Every knob added later with a default that changes the fit belongs here.
+const BEFORE_IT_EXISTED: [(&str, &str, f64); 2] = [
+    // 2026-12-06, thirteenth session.
+    ("placement", "polish_deg", 0.0),
+    // 2026-12-06, fourteenth session.
+    ("placement", "initial_polish_deg", 0.0),
+];
+
 /// What `track --config` reads: a configuration, and where the file is a run's metrics.json,
 /// the mode and frames that run used.
 #[derive(Debug, Clone, PartialEq)]
@@ -212,8 +223,19 @@ impl RecordedRun {
             .get("frames")
             .map(|f| serde_json::from_value::<[usize; 2]>(f.clone()))
             .transpose()?;
+        let mut fit = fit.clone();
+        if let Some(sections) = fit.as_object_mut() {
+            for (section, key, before) in BEFORE_IT_EXISTED {
+                let section = sections
+                    .entry(section)
+                    .or_insert_with(|| serde_json::json!({}));
+                if let Some(keys) = section.as_object_mut() {
+                    keys.entry(key).or_insert_with(|| before.into());
+                }
+            }
+        }
         Ok(RecordedRun {
-            config: serde_json::from_value(fit.clone())?,
+            config: serde_json::from_value(fit)?,
             mode,
             frames: frames.map(|[a, b]| (a, b)),
         })

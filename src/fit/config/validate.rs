@@ -220,6 +220,11 @@ impl FitConfig {
         within("placement.rolls", pl.rolls, 1..=360)?;
         within("placement.refined", pl.refined, 1..=1000)?;
         within("placement.polish_deg", pl.polish_deg, 0.0..=90.0)?;
+        within(
+            "placement.initial_polish_deg",
+            pl.initial_polish_deg,
+            0.0..=90.0,
+        )?;
         non_negative("placement.min_area_px", pl.min_area_px)?;
         positive("placement.reference_depth_mm", pl.reference_depth_mm)?;
         check(
