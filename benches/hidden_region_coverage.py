@@ -290,8 +290,11 @@ TUNING = [
     (3414, 640, 360, 0.02, 2, None, True),
     (3415, 480, 270, 0.02, 2, None, False),
     (3416, 480, 270, 0.04, 4, None, True),
-]
-TEST = [
+    # The fifteenth (session 2026-12-06, fourteenth; a given initial pose polished): `--calibrate`
+    # on the 192 above chose s 0.25, e 1, k 0, d_c 0.01, u 1.25, g 0.5 (LSC 96.1 % at 3.66 mm,
+    # LS 95.1 % at 2.80; the constants before held 98.1 % and 97.2 % at 3.66 / 3.65), taken;
+    # 3601-3616 were then reported once (LSC 93.0 % at 3.80 mm, LS 89.6 % at 2.81), so they
+    # joined the tuning set; 3801-3816 were fixed as the test set before anything else.
     (3601, 640, 360, 0.03, 2, None, True),
     (3602, 480, 270, 0.04, 2, None, True),
     (3603, 960, 540, 0.02, 2, None, True),
@@ -308,6 +311,24 @@ TEST = [
     (3614, 640, 360, 0.02, 2, None, True),
     (3615, 480, 270, 0.02, 2, None, False),
     (3616, 480, 270, 0.04, 4, None, True),
+]
+TEST = [
+    (3801, 640, 360, 0.03, 2, None, True),
+    (3802, 480, 270, 0.04, 2, None, True),
+    (3803, 960, 540, 0.02, 2, None, True),
+    (3804, 480, 270, 0.05, 2, None, False),
+    (3805, 480, 270, 0.02, 4, None, True),
+    (3806, 640, 360, 0.05, 2, None, True),
+    (3807, 480, 270, 0.03, 2, "case_00023", False),
+    (3808, 960, 540, 0.04, 2, None, True),
+    (3809, 480, 270, 0.03, 2, None, True),
+    (3810, 640, 360, 0.04, 4, None, True),
+    (3811, 480, 270, 0.05, 2, None, True),
+    (3812, 960, 540, 0.03, 2, None, False),
+    (3813, 480, 270, 0.04, 2, "case_00023", True),
+    (3814, 640, 360, 0.02, 2, None, True),
+    (3815, 480, 270, 0.02, 2, None, False),
+    (3816, 480, 270, 0.04, 4, None, True),
 ]
 
 FRAMES = 24

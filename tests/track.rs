@@ -480,8 +480,9 @@ fn rotation_of(affine: &serde_json::Value) -> glam::DMat3 {
         .iter()
         .map(|v| v.as_f64().unwrap())
         .collect();
-    let mut r = glam::DMat3::from_cols_array(&[q[0], q[1], q[2], q[3], q[4], q[5], q[6], q[7], q[8]])
-        .transpose();
+    let mut r =
+        glam::DMat3::from_cols_array(&[q[0], q[1], q[2], q[3], q[4], q[5], q[6], q[7], q[8]])
+            .transpose();
     for _ in 0..30 {
         r = (r + r.inverse().transpose()) * 0.5;
     }

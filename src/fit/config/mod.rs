@@ -607,12 +607,18 @@ mod tests {
         let metrics = serde_json::json!({ "mode": "LSC", "timing": {}, "config": before });
         let run = RecordedRun::from_json(&metrics.to_string()).unwrap();
         assert_eq!(
-            (run.config.placement.polish_deg, run.config.placement.initial_polish_deg),
+            (
+                run.config.placement.polish_deg,
+                run.config.placement.initial_polish_deg
+            ),
             (0.0, 0.0)
         );
         assert_eq!(run.config.placement.refined, c.placement.refined);
         let mut without = serde_json::to_value(&run.config).unwrap();
-        without["placement"].as_object_mut().unwrap().remove("polish_deg");
+        without["placement"]
+            .as_object_mut()
+            .unwrap()
+            .remove("polish_deg");
         let own = RecordedRun::from_json(&without.to_string()).unwrap();
         assert_eq!(own.config.placement.polish_deg, c.placement.polish_deg);
         assert!(c.placement.polish_deg > 0.0 && c.placement.initial_polish_deg > 0.0);
