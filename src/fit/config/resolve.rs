@@ -179,10 +179,12 @@ pub enum ConfigFileError {
     NoConfig,
 }
 
-/// Knobs added after runs began to record their configuration, with the value that does what
-/// the fit did before each existed: a run's metrics.json that lacks one ran without it, so it
-/// is read as that value, not as today's default (which a configuration file of one's own
-/// still gets). Every knob added later with a default that changes the fit belongs here.
+/// Knobs added since 2026-12-06 with a default that changes the fit, and the value that does
+/// what the fit did before each existed: a run's metrics.json that lacks one ran without it,
+/// so it is read as that value, not as today's default (which a configuration file of one's
+/// own still gets). Knobs added earlier (e.g. `zoom.detector.warmup_frames`,
+/// `tracking.reinit_max_jump_mm`) are not listed: a metrics.json from before them replays
+/// with today's value. Every knob added from now on with such a default belongs here.
 const BEFORE_IT_EXISTED: [(&str, &str, f64); 2] = [
     // 2026-12-06, thirteenth session.
     ("placement", "polish_deg", 0.0),
@@ -239,5 +241,41 @@ impl RecordedRun {
             mode,
             frames: frames.map(|[a, b]| (a, b)),
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A run recorded before a knob existed ran without it: its metrics.json reads as the
+    /// knob's value then, a configuration file of one's own as today's default.
+    #[test]
+    fn a_recorded_run_without_a_later_knob_replays_without_it() {
+        let c = FitConfig::default();
+        assert!(c.placement.polish_deg > 0.0 && c.placement.initial_polish_deg > 0.0);
+        let mut before = serde_json::to_value(c.resolved(Mode::LSC, 1)).unwrap();
+        let placement = before["fit"]["placement"].as_object_mut().unwrap();
+        placement.remove("polish_deg");
+        placement.remove("initial_polish_deg");
+        let metrics = serde_json::json!({ "mode": "LSC", "timing": {}, "config": before });
+        let run = RecordedRun::from_json(&metrics.to_string()).unwrap();
+        assert_eq!(
+            (
+                run.config.placement.polish_deg,
+                run.config.placement.initial_polish_deg
+            ),
+            (0.0, 0.0)
+        );
+        assert_eq!(run.config.placement.refined, c.placement.refined);
+        let mut own = serde_json::to_value(&run.config).unwrap();
+        let placement = own["placement"].as_object_mut().unwrap();
+        placement.remove("polish_deg");
+        placement.remove("initial_polish_deg");
+        let own = RecordedRun::from_json(&own.to_string()).unwrap().config;
+        assert_eq!(
+            (own.placement.polish_deg, own.placement.initial_polish_deg),
+            (c.placement.polish_deg, c.placement.initial_polish_deg)
+        );
     }
 }
