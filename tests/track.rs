@@ -497,10 +497,11 @@ fn degrees_between(a: glam::DMat3, b: glam::DMat3) -> f64 {
 }
 
 /// A given `initial_pose` 12° off about the camera's x axis (through the kidney's centre) ends
-/// in a basin of its own when it is fitted as it is; turned by ±10° about each camera axis
-/// and refined beside itself (`placement.initial_polish_deg`), the most confident start is
-/// nearer the truth. Measured on this phantom: frame 0 6.2° from the truth unpolished, 4.1°
-/// polished.
+/// in a basin of its own when it is fitted as it is; refined, its refinement turned by ±10°
+/// about each camera axis and refined again (`placement.initial_polish_deg`), the most
+/// confident start is nearer the truth. Measured on this phantom: frame 0 6.2° from the truth
+/// unpolished, 4.1° polished. (The turn is about one of the polish's own axes, its easiest
+/// case; an off-axis start is not tested.)
 #[test]
 fn a_given_pose_in_a_wrong_basin_is_polished_towards_the_truth() {
     let scene = synth("polish", &[]);
