@@ -158,19 +158,7 @@ pub fn run_timed(
         appearance.stats.oob_error
     );
     let model = Model::build(scene)?;
-    let affine = match scene.initial_pose {
-        Some(a) => {
-            crate::fit::init::polished_pose(scene, &model, &appearance, config, frames.0, a)?
-        }
-        None => crate::fit::init::automatic_pose(
-            scene,
-            &model,
-            &appearance,
-            config,
-            frames.0,
-            crate::fit::init::Placing::Start,
-        )?,
-    };
+    let affine = crate::fit::init::starting_pose(scene, &model, &appearance, config, frames.0)?;
     let start = initial_state(scene, &model, affine);
     let options =
         TrackOptions::new(mode, frames, scene.cameras[0].width).with_config(config.clone());

@@ -408,26 +408,16 @@ fn run(
                 ));
             }
             let model = need_model(state)?;
-            // The scene's own pose (the app starts from it until a fit or a placement
-            // replaces it) is polished as `endofuse track` polishes it; a fit or a placement
-            // is taken as it is.
-            let affine = match start.or(scene.initial_pose) {
-                Some(a) if Some(a) == scene.initial_pose => crate::fit::init::polished_pose(
-                    &scene,
-                    &model,
-                    &appearance,
-                    &state.config,
-                    frames.0,
-                    a,
-                )?,
+            // A fit or a placement the app passes is taken as it is; the scene's own pose
+            // (the app starts from it until one replaces it) starts as `endofuse track` starts.
+            let affine = match start.filter(|a| Some(*a) != scene.initial_pose) {
                 Some(a) => a,
-                None => crate::fit::init::automatic_pose(
+                None => crate::fit::init::starting_pose(
                     &scene,
                     &model,
                     &appearance,
                     &state.config,
                     frames.0,
-                    crate::fit::init::Placing::Start,
                 )?,
             };
             let options = TrackOptions::new(mode, frames, scene.cameras[0].width)

@@ -3,6 +3,8 @@
 
 mod common;
 
+use endofuse::geometry::Affine;
+use endofuse::geometry::pose::{nearest_rotation, rotation_from_vector, rotation_to_vector};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -471,29 +473,21 @@ fn a_run_is_reproduced_from_its_metrics_and_its_config_is_honoured() {
     assert!(err.contains("placement.levels"), "{err}");
 }
 
-/// The rotation part of a trajectory's 12-number affine (row-major linear part, then the
-/// translation), by polar decomposition: the fitted affine scales and shears a little.
-fn rotation_of(affine: &serde_json::Value) -> glam::DMat3 {
-    let q: Vec<f64> = affine
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_f64().unwrap())
-        .collect();
-    let mut r =
-        glam::DMat3::from_cols_array(&[q[0], q[1], q[2], q[3], q[4], q[5], q[6], q[7], q[8]])
-            .transpose();
-    for _ in 0..30 {
-        r = (r + r.inverse().transpose()) * 0.5;
+/// A trajectory's or scene's 12-number affine.
+fn affine_of(q: &serde_json::Value) -> Affine {
+    Affine {
+        q: serde_json::from_value(q.clone()).unwrap(),
     }
-    r
+}
+
+/// The rotation nearest an affine's linear part: the fitted affine scales and shears a little.
+fn rotation_of(q: &serde_json::Value) -> glam::DMat3 {
+    nearest_rotation(affine_of(q).linear()).unwrap()
 }
 
 /// Degrees between two rotations.
 fn degrees_between(a: glam::DMat3, b: glam::DMat3) -> f64 {
-    let m = a * b.transpose();
-    let cos = ((m.x_axis.x + m.y_axis.y + m.z_axis.z - 1.0) / 2.0).clamp(-1.0, 1.0);
-    cos.acos().to_degrees()
+    rotation_to_vector(a * b.transpose()).length().to_degrees()
 }
 
 /// A given `initial_pose` 12° off about the camera's x axis (through the kidney's centre) ends
@@ -507,25 +501,16 @@ fn a_given_pose_in_a_wrong_basin_is_polished_towards_the_truth() {
     let scene = synth("polish", &[]);
     let truth = json(&scene.join("gt/trajectory.json"))["frames"][0].clone();
     let r_true = rotation_of(&truth["affine"]);
-    let centre: Vec<f64> = truth["centroids"]["kidney"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_f64().unwrap())
-        .collect();
-    let centre = glam::DVec3::from_slice(&centre);
-    let q: Vec<f64> = truth["affine"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_f64().unwrap())
-        .collect();
-    let turn = glam::DMat3::from_axis_angle(glam::DVec3::X, 12f64.to_radians());
-    let linear = glam::DMat3::from_cols_array(&q[..9].try_into().unwrap()).transpose();
-    let (linear, t) = (turn * linear, glam::DVec3::from_slice(&q[9..12]));
-    let t = turn * t + centre - turn * centre;
-    let rows = linear.transpose().to_cols_array();
-    let given: Vec<f64> = rows.iter().copied().chain([t.x, t.y, t.z]).collect();
+    let centre: [f64; 3] = serde_json::from_value(truth["centroids"]["kidney"].clone()).unwrap();
+    let centre = glam::DVec3::from(centre);
+    let truth_pose = affine_of(&truth["affine"]);
+    let turn = rotation_from_vector(glam::DVec3::X * 12f64.to_radians());
+    let given = Affine::from_linear_translation(
+        turn * truth_pose.linear(),
+        turn * truth_pose.translation_mm() + centre - turn * centre,
+    )
+    .q
+    .to_vec();
     common::edit_json(&scene, |s| {
         s["initial_pose"] = serde_json::json!({ "affine": given });
     });

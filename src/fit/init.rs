@@ -15,11 +15,9 @@ use super::context::FrameContext;
 use super::model::Model;
 use super::optimizer::fit_frame;
 use super::probability::ViewProbabilities;
-use super::state::FitState;
 use crate::appearance::features::downsample;
 use crate::appearance::{Appearance, ClassMap};
 use crate::error::{Error, InputError};
-use crate::geometry::camera::Intrinsics;
 use crate::geometry::pose::rotation_from_vector;
 use crate::geometry::{Affine, Camera};
 use crate::plane::Plane;
@@ -108,10 +106,9 @@ pub fn automatic_pose(
     placing: Placing,
 ) -> Result<Affine, Error> {
     let placement = &config.placement;
-    let frames: Vec<Arc<image::RgbImage>> = (0..scene.cameras.len())
-        .map(|c| scene.frame(c, t))
-        .collect::<Result<_, _>>()?;
-    let small: Vec<image::RgbImage> = frames
+    let mut refiner = Refiner::new(scene, model, appearance, config, t)?;
+    let small: Vec<image::RgbImage> = refiner
+        .frames
         .iter()
         .map(|f| (0..placement.score_level).fold(f.as_ref().clone(), |img, _| downsample(&img)))
         .collect();
@@ -144,11 +141,10 @@ pub fn automatic_pose(
     centre /= area;
     let ray = cams[0].intrinsics.unproject(centre);
     let ray = DVec3::new(ray.x, ray.y, 1.0);
-    let mean = model.deformed(&vec![0.0; model.shape.mode_count()]);
-    let centre_pre = crate::geometry::mesh::vertex_mean(&mean[model.anchor]);
+    let (mean, centre_pre) = (&refiner.mean, refiner.centre_pre);
     let visible = model.indices(true);
     let rasters = |affine: &Affine, cams: &[Camera]| -> Vec<ViewRaster> {
-        let posed = model.posed(affine, &mean);
+        let posed = model.posed(affine, mean);
         let objects = model.objects(&posed, &visible);
         cams.iter()
             .map(|c| rasterize(c, &objects, &RasterOptions::default()))
@@ -191,7 +187,6 @@ pub fn automatic_pose(
     }
     scored.sort_by(|a, b| b.0.total_cmp(&a.0));
     // Refine the best few rigidly at coarse levels; keep the most confident.
-    let mut refiner = Refiner::new(scene, model, appearance, config, &frames, classes.len());
     for (_, affine) in scored.into_iter().take(placement.refined) {
         refiner.refine(affine);
     }
@@ -199,7 +194,7 @@ pub fn automatic_pose(
     // turns about its long axis): the winner turned by ± `polish_deg` about each of camera
     // 0's axes, through the model's centre, is refined too.
     if placing == Placing::Start {
-        refiner.polish(centre_pre, placement.polish_deg);
+        refiner.polish(placement.polish_deg);
     }
     refiner.best.map(|b| b.refined).ok_or_else(|| {
         InputError::new(
@@ -208,6 +203,22 @@ pub fn automatic_pose(
         )
         .into()
     })
+}
+
+/// The pose a run starting at frame `t` fits first: the scene's `initial_pose`, polished
+/// ([`polished_pose`]), or without one the automatic placement ([`automatic_pose`]). What
+/// `endofuse track` and the app both start from.
+pub fn starting_pose(
+    scene: &Scene,
+    model: &Model,
+    appearance: &Appearance,
+    config: &FitConfig,
+    t: usize,
+) -> Result<Affine, Error> {
+    match scene.initial_pose {
+        Some(given) => polished_pose(scene, model, appearance, config, t, given),
+        None => automatic_pose(scene, model, appearance, config, t, Placing::Start),
+    }
 }
 
 /// The scene's `initial_pose` refined as the placement refines its hypotheses, and that
@@ -228,15 +239,9 @@ pub fn polished_pose(
     if degrees <= 0.0 {
         return Ok(start);
     }
-    let frames: Vec<Arc<image::RgbImage>> = (0..scene.cameras.len())
-        .map(|c| scene.frame(c, t))
-        .collect::<Result<_, _>>()?;
-    let classes = ClassMap::from_scene(scene);
-    let mean = model.deformed(&vec![0.0; model.shape.mode_count()]);
-    let centre_pre = crate::geometry::mesh::vertex_mean(&mean[model.anchor]);
-    let mut refiner = Refiner::new(scene, model, appearance, config, &frames, classes.len());
+    let mut refiner = Refiner::new(scene, model, appearance, config, t)?;
     refiner.refine(start);
-    refiner.polish(centre_pre, degrees);
+    refiner.polish(degrees);
     // The given pose, where no turn of it was more confident: the full fit of the first frame
     // starts from it, as it would unpolished (the coarse rigid fit can move a good pose a few
     // degrees the wrong way).
@@ -261,45 +266,53 @@ struct Refined {
 /// over (`FrameFeatures::valid`), so each pose reuses what the others classified.
 struct Refiner<'a> {
     ctx: FrameContext<'a>,
-    model: &'a Model,
+    scene: &'a Scene,
     appearance: &'a Appearance,
     params: FitParams,
+    /// The frame of every view, full resolution.
+    frames: Vec<Arc<image::RgbImage>>,
     views: Vec<ViewProbabilities>,
-    intrinsics: Vec<Intrinsics>,
+    /// The mean shape (preoperative mm) and its anchor structure's centre, which turns keep.
+    mean: Arc<Vec<Vec<DVec3>>>,
+    centre_pre: DVec3,
     best: Option<Refined>,
 }
 
 impl<'a> Refiner<'a> {
+    /// Reads frame `t` of every view (an unreadable frame is the caller's error).
     fn new(
         scene: &'a Scene,
         model: &'a Model,
         appearance: &'a Appearance,
         config: &FitConfig,
-        frames: &[Arc<image::RgbImage>],
-        classes: usize,
-    ) -> Self {
+        t: usize,
+    ) -> Result<Self, Error> {
+        let frames: Vec<Arc<image::RgbImage>> = (0..scene.cameras.len())
+            .map(|c| scene.frame(c, t))
+            .collect::<Result<_, _>>()?;
         let params = config.resolve(Mode::R, Phase::Placement, Zoom::Off, 0);
         let pyramid = params.levels.iter().max().map_or(1, |l| l + 1);
-        Refiner {
+        let classes = ClassMap::from_scene(scene).len();
+        let mean = model.deformed(&vec![0.0; model.shape.mode_count()]);
+        let centre_pre = crate::geometry::mesh::vertex_mean(&mean[model.anchor]);
+        Ok(Refiner {
             ctx: FrameContext::new(model, scene),
-            model,
+            scene,
             appearance,
             views: frames
                 .iter()
                 .map(|f| ViewProbabilities::new(f.clone(), pyramid, classes))
                 .collect(),
+            frames,
             params,
-            intrinsics: scene.cameras.iter().map(|c| c.intrinsics).collect(),
+            mean,
+            centre_pre,
             best: None,
-        }
+        })
     }
 
     fn refine(&mut self, affine: Affine) {
-        let start = FitState {
-            affine,
-            shape: vec![0.0; self.model.shape.mode_count()],
-            intrinsics: self.intrinsics.clone(),
-        };
+        let start = super::tracker::initial_state(self.scene, self.ctx.model, affine);
         let fit = fit_frame(
             &self.ctx,
             &start,
@@ -332,12 +345,12 @@ impl<'a> Refiner<'a> {
     }
 
     /// The most confident pose so far turned by ±`degrees` about each of camera 0's axes,
-    /// through the model's centre (`centre_pre`, preoperative mm), each refined in turn.
-    fn polish(&mut self, centre_pre: DVec3, degrees: f64) {
+    /// through the model's centre, each refined in turn.
+    fn polish(&mut self, degrees: f64) {
         let Some(winner) = self.best.filter(|_| degrees > 0.0).map(|b| b.refined) else {
             return;
         };
-        let centre = winner.apply(centre_pre);
+        let centre = winner.apply(self.centre_pre);
         for axis in [DVec3::X, DVec3::Y, DVec3::Z] {
             for sign in [-1.0, 1.0] {
                 let turn = axis * (sign * degrees.to_radians());
