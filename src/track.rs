@@ -158,7 +158,8 @@ pub fn run_timed(
         appearance.stats.oob_error
     );
     let model = Model::build(scene)?;
-    let affine = crate::fit::init::starting_pose(scene, &model, &appearance, config, frames.0)?;
+    let affine =
+        crate::fit::init::starting_pose(scene, &model, &appearance, config, frames.0, cancel)?;
     let start = initial_state(scene, &model, affine);
     let options =
         TrackOptions::new(mode, frames, scene.cameras[0].width).with_config(config.clone());

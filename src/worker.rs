@@ -386,6 +386,7 @@ fn run(
                 &state.config,
                 frame,
                 crate::fit::init::Placing::Start,
+                Some(cancel),
             )?;
             emit(out, Event::Initialised(affine))?;
         }
@@ -418,6 +419,7 @@ fn run(
                     &appearance,
                     &state.config,
                     frames.0,
+                    Some(cancel),
                 )?,
             };
             let options = TrackOptions::new(mode, frames, scene.cameras[0].width)

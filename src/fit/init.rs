@@ -25,6 +25,7 @@ use crate::render::raster::{RasterOptions, ViewRaster, rasterize};
 use crate::scene::Scene;
 use glam::{DMat3, DVec2, DVec3};
 use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Unit directions spread over the sphere (Fibonacci lattice).
 fn directions(n: usize) -> Vec<DVec3> {
@@ -97,6 +98,7 @@ pub enum Placing {
 }
 
 /// Estimates the pose of frame `t` from the forest alone, with `config.placement`.
+/// Err(Cancelled) once `cancel` is set (read between hypotheses and between refinements).
 pub fn automatic_pose(
     scene: &Scene,
     model: &Model,
@@ -104,9 +106,10 @@ pub fn automatic_pose(
     config: &FitConfig,
     t: usize,
     placing: Placing,
+    cancel: Option<&AtomicBool>,
 ) -> Result<Affine, Error> {
     let placement = &config.placement;
-    let mut refiner = Refiner::new(scene, model, appearance, config, t)?;
+    let mut refiner = Refiner::new(scene, model, appearance, config, t, cancel)?;
     let small: Vec<image::RgbImage> = refiner
         .frames
         .iter()
@@ -172,6 +175,7 @@ pub fn automatic_pose(
     let mut scored: Vec<(f64, Affine)> = Vec::new();
     let roll_angle = std::f64::consts::TAU / placement.rolls.max(1) as f64;
     for d in directions(placement.directions) {
+        refiner.cancelled()?;
         for roll in 0..placement.rolls {
             let rot = rotation_from_vector(d * (roll as f64 * roll_angle)) * align_z(d);
             // Depth from the area: projected area falls with the square of depth.
@@ -188,13 +192,13 @@ pub fn automatic_pose(
     scored.sort_by(|a, b| b.0.total_cmp(&a.0));
     // Refine the best few rigidly at coarse levels; keep the most confident.
     for (_, affine) in scored.into_iter().take(placement.refined) {
-        refiner.refine(affine);
+        refiner.refine(affine)?;
     }
     // The refinement can stop 15–30° from the truth (a kidney's outline changes little as it
     // turns about its long axis): the winner turned by ± `polish_deg` about each of camera
     // 0's axes, through the model's centre, is refined too.
     if placing == Placing::Start {
-        refiner.polish(placement.polish_deg);
+        refiner.polish(placement.polish_deg)?;
     }
     refiner.best.map(|b| b.refined).ok_or_else(|| {
         InputError::new(
@@ -207,17 +211,18 @@ pub fn automatic_pose(
 
 /// The pose a run starting at frame `t` fits first: the scene's `initial_pose`, polished
 /// ([`polished_pose`]), or without one the automatic placement ([`automatic_pose`]). What
-/// `endofuse track` and the app both start from.
+/// `endofuse track` and the app both start from. Err(Cancelled) once `cancel` is set.
 pub fn starting_pose(
     scene: &Scene,
     model: &Model,
     appearance: &Appearance,
     config: &FitConfig,
     t: usize,
+    cancel: Option<&AtomicBool>,
 ) -> Result<Affine, Error> {
     match scene.initial_pose {
-        Some(given) => polished_pose(scene, model, appearance, config, t, given),
-        None => automatic_pose(scene, model, appearance, config, t, Placing::Start),
+        Some(given) => polished_pose(scene, model, appearance, config, t, given, cancel),
+        None => automatic_pose(scene, model, appearance, config, t, Placing::Start, cancel),
     }
 }
 
@@ -226,7 +231,8 @@ pub fn starting_pose(
 /// the model's centre and refined again; the most confident, per structure, wins (the given
 /// pose itself, unrefined, where its own refinement does). Fitted as it is, a pose 10° off can
 /// stop 9° off, in a basin of its own (a kidney's outline changes little as it turns about
-/// some axes). The cancel flag is not read here: seven coarse fits, 0.5-0.6 s at 960×540.
+/// some axes). Seven coarse fits, 0.5-0.6 s at 960×540; Err(Cancelled) between two of them
+/// once `cancel` is set.
 pub fn polished_pose(
     scene: &Scene,
     model: &Model,
@@ -234,14 +240,15 @@ pub fn polished_pose(
     config: &FitConfig,
     t: usize,
     start: Affine,
+    cancel: Option<&AtomicBool>,
 ) -> Result<Affine, Error> {
     let degrees = config.placement.initial_polish_deg;
     if degrees <= 0.0 {
         return Ok(start);
     }
-    let mut refiner = Refiner::new(scene, model, appearance, config, t)?;
-    refiner.refine(start);
-    refiner.polish(degrees);
+    let mut refiner = Refiner::new(scene, model, appearance, config, t, cancel)?;
+    refiner.refine(start)?;
+    refiner.polish(degrees)?;
     // The given pose, where no turn of it was more confident: the full fit of the first frame
     // starts from it, as it would unpolished (the coarse rigid fit can move a good pose a few
     // degrees the wrong way).
@@ -276,6 +283,7 @@ struct Refiner<'a> {
     mean: Arc<Vec<Vec<DVec3>>>,
     centre_pre: DVec3,
     best: Option<Refined>,
+    cancel: Option<&'a AtomicBool>,
 }
 
 impl<'a> Refiner<'a> {
@@ -286,6 +294,7 @@ impl<'a> Refiner<'a> {
         appearance: &'a Appearance,
         config: &FitConfig,
         t: usize,
+        cancel: Option<&'a AtomicBool>,
     ) -> Result<Self, Error> {
         let frames: Vec<Arc<image::RgbImage>> = (0..scene.cameras.len())
             .map(|c| scene.frame(c, t))
@@ -308,10 +317,21 @@ impl<'a> Refiner<'a> {
             mean,
             centre_pre,
             best: None,
+            cancel,
         })
     }
 
-    fn refine(&mut self, affine: Affine) {
+    /// Err(Cancelled) once the user cancelled: a placement cut short places nothing.
+    fn cancelled(&self) -> Result<(), Error> {
+        if self.cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
+            Err(Error::Cancelled)
+        } else {
+            Ok(())
+        }
+    }
+
+    fn refine(&mut self, affine: Affine) -> Result<(), Error> {
+        self.cancelled()?;
         let start = super::tracker::initial_state(self.scene, self.ctx.model, affine);
         let fit = fit_frame(
             &self.ctx,
@@ -342,21 +362,23 @@ impl<'a> Refiner<'a> {
                 refined: fit.state.affine,
             });
         }
+        Ok(())
     }
 
     /// The most confident pose so far turned by ±`degrees` about each of camera 0's axes,
     /// through the model's centre, each refined in turn.
-    fn polish(&mut self, degrees: f64) {
+    fn polish(&mut self, degrees: f64) -> Result<(), Error> {
         let Some(winner) = self.best.filter(|_| degrees > 0.0).map(|b| b.refined) else {
-            return;
+            return Ok(());
         };
         let centre = winner.apply(self.centre_pre);
         for axis in [DVec3::X, DVec3::Y, DVec3::Z] {
             for sign in [-1.0, 1.0] {
                 let turn = axis * (sign * degrees.to_radians());
-                self.refine(turned_about(&winner, centre, turn));
+                self.refine(turned_about(&winner, centre, turn))?;
             }
         }
+        Ok(())
     }
 }
 
@@ -364,6 +386,46 @@ impl<'a> Refiner<'a> {
 mod tests {
     use super::*;
     use crate::geometry::pose::rotation_to_vector;
+
+    /// A cancel stops the automatic placement and the polish of a given pose (the app's
+    /// Initialise and Track wait on them for a second or more): Err(Cancelled), not a pose;
+    /// with the flag clear the same calls place the model.
+    #[test]
+    fn a_cancelled_placement_or_polish_places_nothing() {
+        use crate::synth::{SynthOptions, memory_scene};
+        let scene = memory_scene(&SynthOptions {
+            frames: 1,
+            width: 240,
+            height: 136,
+            noise: 0.02,
+            ..SynthOptions::default()
+        })
+        .unwrap();
+        let model = Model::build(&scene).unwrap();
+        let appearance = Appearance::for_tests(&scene, 4);
+        let config = FitConfig::default();
+        let given = scene
+            .initial_pose
+            .expect("the phantom gives an initial pose");
+        let cancelled = AtomicBool::new(true);
+        let place = |cancel| {
+            automatic_pose(
+                &scene,
+                &model,
+                &appearance,
+                &config,
+                0,
+                Placing::Start,
+                cancel,
+            )
+        };
+        let polish = |cancel| polished_pose(&scene, &model, &appearance, &config, 0, given, cancel);
+        assert!(matches!(place(Some(&cancelled)), Err(Error::Cancelled)));
+        assert!(matches!(polish(Some(&cancelled)), Err(Error::Cancelled)));
+        let clear = AtomicBool::new(false);
+        assert!(place(Some(&clear)).is_ok());
+        assert!(polish(Some(&clear)).is_ok());
+    }
 
     /// A polishing turn keeps the model's centre where it was, turns the pose by exactly the
     /// angle asked about the axis asked, and leaves its scale and shear alone.

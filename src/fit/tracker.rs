@@ -536,6 +536,7 @@ impl<'a> FrameTracker<'a> {
             config,
             t,
             super::init::Placing::Recovery,
+            self.cancel,
         ) {
             Ok(affine) => affine,
             Err(e) => {
