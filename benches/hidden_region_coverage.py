@@ -10,15 +10,16 @@ and the median radius per mode, on a tuning set and a held-out test set.
 `--calibrate` (tuning set only) also searches the constants the images cannot know: each
 frame's covariance as the tracker wrote it is taken apart into its data part (the fit's own
 information carried to the centroid) with the constants it ran with (metrics.json's config), and
-rebuilt for each candidate: on LSC the covariance scale s, the model error e, its share of the
-unexplained rim k and the depth after a corrected zoom d; on LS, with s, e and k kept, the depth
-after a zoom the pose alone followed d_u and its share u of the depth the fit moved since the zoom
-began; on the lost frames the growth g. With numpy, s, e and k (which both modes share) are
-searched for both modes at once: of the candidates whose coverage is at least 95 % of the
-tuning frames in LSC and in LS, the one with the smallest mean of the two median radii
-(without numpy, the staged search: s, e, k on LSC alone, then LS's terms). The constants are
-printed, to be made the defaults. The seeds
-below were fixed before any constant was chosen; the test set is never used to choose. Not part
+rebuilt for each candidate: the covariance scale s, the model error e, its growth k with the rim
+the fit leaves unexplained beyond a floor ρ₀, the depth after a corrected zoom d_c (LSC), after
+a zoom the pose alone followed d_u and its share u of the depth the fit moved since the zoom
+began (LS); on the lost frames the growth g. With numpy, the candidates are judged as a held-out
+set will judge them: on 2000 sets of 16 tuning scenes drawn like the test set (per test scene,
+a tuning scene of its kind), the share of sets whose coverage is 90-98 % with a median radius of
+at most 4 mm, the smaller share of the two modes, ties to the smaller radius (a set's frames miss
+scene by scene, so pooled coverage says too little). Without numpy, the staged search: the
+smallest median radius holding 95 % of the pooled frames, s, e, k, d_c on LSC, then LS's terms.
+The constants are printed, to be made the defaults. The seeds below were fixed before any constant was chosen; the test set is never used to choose. Not part
 of CI: about half a minute per scene and mode on 2 cores.
 """
 
@@ -383,10 +384,45 @@ _SAMPLES = None
 
 
 def samples():
+    """The tracker's fixed normal samples (`fit::hidden_region::normal_samples`: 8192 triples
+    from `rng::Rng` seeded 0x6869_6464_656e, Box-Muller), so that a radius rebuilt here is the
+    one the tracker would write (other samples put the 95 % quantile ~2 % elsewhere)."""
     global _SAMPLES
     if _SAMPLES is None:
-        rng = random.Random(95)
-        _SAMPLES = [(rng.gauss(0, 1), rng.gauss(0, 1), rng.gauss(0, 1)) for _ in range(4096)]
+        mask = (1 << 64) - 1
+
+        def splitmix(z):
+            z = (z + 0x9E3779B97F4A7C15) & mask
+            x = z
+            x = ((x ^ (x >> 30)) * 0xBF58476D1CE4E5B9) & mask
+            x = ((x ^ (x >> 27)) * 0x94D049BB133111EB) & mask
+            return z, x ^ (x >> 31)
+
+        def rotl(x, k):
+            return ((x << k) | (x >> (64 - k))) & mask
+
+        z, st = 0x6869_6464_656E, []
+        for _ in range(4):
+            z, v = splitmix(z)
+            st.append(v)
+
+        def next_u64():
+            result = (rotl((st[1] * 5) & mask, 7) * 9) & mask
+            t = (st[1] << 17) & mask
+            st[2] ^= st[0]
+            st[3] ^= st[1]
+            st[1] ^= st[2]
+            st[0] ^= st[3]
+            st[2] ^= t
+            st[3] = rotl(st[3], 45)
+            return result
+
+        def normal():
+            u1 = max((next_u64() >> 11) * (1.0 / (1 << 53)), 1e-300)
+            u2 = (next_u64() >> 11) * (1.0 / (1 << 53))
+            return math.sqrt(-2.0 * math.log(u1)) * math.cos(2 * math.pi * u2)
+
+        _SAMPLES = [(normal(), normal(), normal()) for _ in range(8192)]
     return _SAMPLES
 
 
@@ -438,19 +474,21 @@ def zoom_kind(row):
 
 def data_part(row, config):
     """The covariance the fit's information gives (before the constants), taken back out of
-    what the tracker wrote: Σ = s · data + (e² + (k · rim)² + (g · n)²) I + zsd² c cᵀ, n frames
-    into a loss (a lost frame keeps the last good frame's data part, rim and zoom terms)."""
+    what the tracker wrote: Σ = s · data + (e² + (k · max(0, rim − ρ₀))² + (g · n)²) I +
+    zsd² c cᵀ, n frames into a loss (a lost frame keeps the last good frame's data part, rim
+    and zoom terms)."""
     s = config.get("covariance_scale", 1.0)
     e = config.get("model_error_mm", 0.0)
     k = config.get("model_error_per_rim_residual", 0.0)
+    r0 = config.get("rim_residual_floor_mm", 0.0)
     g = config.get("lost_growth_mm_per_frame", 0.0)
-    diag = e * e + (k * row["rim"]) ** 2 + (g * row["lost"]) ** 2
+    diag = e * e + (k * max(row["rim"] - r0, 0.0)) ** 2 + (g * row["lost"]) ** 2
     c, z = row["c"], row["zsd"]
     return [[(row["cov"][i][j] - (diag if i == j else 0) - z * z * c[i] * c[j]) / s
              for j in range(3)] for i in range(3)]
 
 
-def rebuilt(row, s, e, k, d_c, d_u, u, g):
+def rebuilt(row, s, e, k, r0, d_c, d_u, u, g):
     """A row's covariance rebuilt from its data part with the constants, as the tracker builds
     it."""
     c = row["c"]
@@ -461,7 +499,7 @@ def rebuilt(row, s, e, k, d_c, d_u, u, g):
         z2 = d_u * d_u + (u * row["zchange"]) ** 2
     else:
         z2 = 0.0
-    diag = e * e + (k * row["rim"]) ** 2 + (g * row["lost"]) ** 2
+    diag = e * e + (k * max(row["rim"] - r0, 0.0)) ** 2 + (g * row["lost"]) ** 2
     return [[s * row["data"][i][j] + (diag if i == j else 0) + z2 * c[i] * c[j]
              for j in range(3)] for i in range(3)]
 
@@ -514,6 +552,7 @@ def calibrate(rows_by_mode, config):
     lost frames of both. Returns the constants and what they give per mode."""
     base = {"s": config.get("covariance_scale", 1.0), "e": config.get("model_error_mm", 0.0),
             "k": config.get("model_error_per_rim_residual", 0.0),
+            "r0": config.get("rim_residual_floor_mm", 0.0),
             "d_c": config.get("zoom_depth_sd_corrected", 0.0),
             "d_u": config.get("zoom_depth_sd_uncorrected", 0.0),
             "u": config.get("zoom_depth_per_depth_change", 0.0),
@@ -536,65 +575,111 @@ def calibrate(rows_by_mode, config):
     return with_lost_growth(base, rows_by_mode)
 
 
-def calibrate_joint(rows_by_mode, config):
-    """Like `calibrate`, but s, e and k (shared by the modes) are chosen for both modes at once:
-    for each of them the smallest zoom terms that bring LSC and LS each to 95 % of their tracked
-    frames, and of all that do, the one with the smallest mean of the two median radii (the
-    staged search settles s, e and k on LSC alone, which can widen LS's region). Needs numpy;
-    None when nothing on the grid reaches 95 % in both modes."""
+def kind_of_scene(spec):
+    """What makes a scene's frames miss together: a KiTS patient's shape, a zoom, four views."""
+    return (spec[5] is not None, spec[6], spec[4] == 4)
+
+
+def set_draws(scenes, shaped_like, draws=2000, seed=16):
+    """`draws` sets of tuning scenes (indices into `scenes`, the specs that have tracked rows)
+    shaped like the set `shaped_like`: for each of its scenes one tuning scene of the same kind,
+    none twice. A set's frames miss together scene by scene, so what a held-out set will show
+    is judged on sets like it, not on the pooled frames."""
+    rng = random.Random(seed)
+    pools = {}
+    for i, spec in enumerate(scenes):
+        pools.setdefault(kind_of_scene(spec), []).append(i)
+    out = []
+    for _ in range(draws):
+        chosen = []
+        for spec in shaped_like:
+            pool = [i for i in pools.get(kind_of_scene(spec), []) if i not in chosen]
+            if not pool:
+                return None
+            chosen.append(rng.choice(pool))
+        out.append(chosen)
+    return out
+
+
+def calibrate_joint(rows_by_mode, config, scenes):
+    """Like `calibrate`, but judged as the held-out set will be: the constants on the grid
+    whose 16-scene sets drawn from the tuning scenes like the test set (`set_draws`) most often
+    meet the issue in both modes, coverage 90-98 % with a median radius of at most 4 mm (the
+    smaller of the two modes' shares, to 0.01; ties to the smaller mean median radius). Pooled
+    frames hide that a set's frames miss scene by scene: 95 % of the pooled frames with a
+    region that does not widen where the fit is worse gave 89.6 % on one test set. `scenes`:
+    each row's "scene" indexes it. Needs numpy; None when no set meets it."""
     import numpy as np
     z2 = np.array(samples()) ** 2
     k95 = math.ceil(0.95 * len(z2)) - 1
+    used = sorted({r["scene"] for rows in rows_by_mode.values() for r in rows if not r["lost"]})
+    draws = set_draws([scenes[i] for i in used], TEST)
+    if draws is None:
+        return calibrate(rows_by_mode, config)
+    draws = np.array(draws)
+    column = {scene: i for i, scene in enumerate(used)}
 
     def prepared(rows):
         kinds = [zoom_kind(r) for r in rows]
+        scene = np.array([column[r["scene"]] for r in rows])
+        slot = np.zeros(len(rows), dtype=int)
+        seen = {}
+        for i, sc in enumerate(scene):
+            slot[i] = seen.get(sc, 0)
+            seen[sc] = slot[i] + 1
         return {
             "data": np.array([r["data"] for r in rows]),
-            "rim2": np.array([r["rim"] ** 2 for r in rows]),
+            "rim": np.array([r["rim"] for r in rows]),
             "cc": np.array([np.outer(r["c"], r["c"]) for r in rows]),
             "corrected": np.array([k == "corrected" for k in kinds], dtype=float),
             "uncorrected": np.array([k == "uncorrected" for k in kinds], dtype=float),
             "zchange2": np.array([(r["zchange"] or 0.0) ** 2 for r in rows]),
             "err": np.array([math.sqrt(sum(v * v for v in r["err"])) for r in rows]),
+            "scene": scene, "slot": slot, "width": int(slot.max()) + 1,
         }
 
-    def evaluate(p, s, e, k, d_c, d_u, u):
-        diag = e * e + k * k * p["rim2"]
+    def evaluate(p, s, e, k, r0, d_c, d_u, u):
+        diag = e * e + (k * np.maximum(p["rim"] - r0, 0.0)) ** 2
         z = p["corrected"] * d_c * d_c + p["uncorrected"] * (d_u * d_u + u * u * p["zchange2"])
         cov = s * p["data"] + diag[:, None, None] * np.eye(3) + z[:, None, None] * p["cc"]
         lam = np.maximum(np.linalg.eigvalsh(cov), 0.0)
         radii = np.sqrt(np.partition(lam @ z2.T, k95, axis=1)[:, k95])
-        return float(np.mean(p["err"] <= radii)), float(np.median(radii))
+        n = len(used)
+        held = np.bincount(p["scene"], p["err"] <= radii, minlength=n)
+        count = np.bincount(p["scene"], minlength=n)
+        by_scene = np.full((n, p["width"]), np.nan)
+        by_scene[p["scene"], p["slot"]] = radii
+        cover = held[draws].sum(1) / np.maximum(count[draws].sum(1), 1)
+        median = np.nanmedian(by_scene[draws].reshape(len(draws), -1), axis=1)
+        met = float(np.mean((cover >= 0.90) & (cover <= 0.98) & (median <= 4.0)))
+        return round(met, 2), float(np.median(radii))
 
     tracked = {m: prepared([r for r in rows if not r["lost"]])
                for m, rows in rows_by_mode.items() if any(not r["lost"] for r in rows)}
     if set(tracked) != {"LSC", "LS"}:
         return calibrate(rows_by_mode, config)
     best = None
-    for s in [0.25, 0.5, 1, 2, 4, 8, 16, 32, 64]:
-        for e in [0.0, 0.5, 0.75, 1.0, 1.25, 1.5]:
-            for k in [0.0, 1.0, 2.0, 3.0, 4.0]:
-                lsc = None
-                for d_c in [0.0, 0.005, 0.01, 0.015, 0.02]:
-                    cover, med = evaluate(tracked["LSC"], s, e, k, d_c, 0.0, 0.0)
-                    if cover >= 0.95 and (lsc is None or med < lsc[1]):
-                        lsc = (d_c, med, cover)
-                if lsc is None:
-                    continue
-                ls = None
-                for d_u in [0.0, 0.01, 0.02, 0.03, 0.04, 0.06]:
-                    for u in [0.0, 0.25, 0.5, 0.75, 1.0, 1.25, 1.5]:
-                        cover, med = evaluate(tracked["LS"], s, e, k, 0.0, d_u, u)
-                        if cover >= 0.95 and (ls is None or med < ls[2]):
-                            ls = (d_u, u, med, cover)
-                if ls is None:
-                    continue
-                score = 0.5 * (lsc[1] + ls[2])
-                if best is None or score < best[0]:
-                    best = (score, {"s": s, "e": e, "k": k, "d_c": lsc[0], "d_u": ls[0],
-                                    "u": ls[1], "g": config.get("lost_growth_mm_per_frame", 0.0)})
-    if best is None:
+    for s in [0.25, 0.5, 1, 2, 4]:
+        for e in [0.0, 0.5, 0.75, 1.0]:
+            for k in [0.0, 2.0, 4.0, 6.0, 8.0]:
+                for r0 in ([0.0] if k == 0 else [0.0, 0.4, 0.5, 0.6]):
+                    lsc = max(((evaluate(tracked["LSC"], s, e, k, r0, d_c, 0.0, 0.0), d_c)
+                               for d_c in [0.005, 0.0075, 0.01, 0.0125, 0.015]),
+                              key=lambda x: (x[0][0], -x[0][1]))
+                    ls = max(((evaluate(tracked["LS"], s, e, k, r0, 0.0, d_u, u), d_u, u)
+                              for d_u in [0.0, 0.01, 0.02]
+                              for u in [0.5, 1.0, 1.5, 2.0, 2.5]),
+                             key=lambda x: (x[0][0], -x[0][1]))
+                    score = (min(lsc[0][0], ls[0][0]), -0.5 * (lsc[0][1] + ls[0][1]))
+                    if best is None or score > best[0]:
+                        best = (score, {"s": s, "e": e, "k": k, "r0": r0, "d_c": lsc[1],
+                                        "d_u": ls[1], "u": ls[2],
+                                        "g": config.get("lost_growth_mm_per_frame", 0.0)},
+                                (lsc[0][0], ls[0][0]))
+    if best is None or best[0][0] <= 0.0:
         return None
+    print(f"  sets like the test set meeting the issue: LSC {100 * best[2][0]:.0f} %, "
+          f"LS {100 * best[2][1]:.0f} % of {len(draws)}")
     return with_lost_growth(best[1], rows_by_mode)
 
 
@@ -620,6 +705,8 @@ def main():
             rows = []
             for spec in sets[name]:
                 r, _, config = track(make_scene(spec, work), mode, work, spec[0])
+                for row in r:
+                    row["scene"] = sets[name].index(spec)
                 rows.extend(r)
             rows_by_mode[mode] = rows
             if not rows:
@@ -636,13 +723,16 @@ def main():
                 search = calibrate_joint
             except ImportError:
                 search = calibrate
-            found = search({m: r for m, r in rows_by_mode.items() if r}, config)
+            chosen_rows = {m: r for m, r in rows_by_mode.items() if r}
+            found = (calibrate_joint(chosen_rows, config, sets[name])
+                     if search is calibrate_joint else calibrate(chosen_rows, config))
             if found is None:
                 print("  calibration: nothing on the grid reaches 95 %")
                 continue
             constants, per_mode, n_lost = found
             print("  calibrated: covariance_scale {s}, model_error_mm {e}, "
-                  "model_error_per_rim_residual {k}, zoom_depth_sd_corrected {d_c}, "
+                  "model_error_per_rim_residual {k}, rim_residual_floor_mm {r0}, "
+                  "zoom_depth_sd_corrected {d_c}, "
                   "zoom_depth_sd_uncorrected {d_u}, zoom_depth_per_depth_change {u}, "
                   "lost_growth_mm_per_frame {g}".format(**constants) + f" ({n_lost} lost frames)")
             for m, (cover, med) in per_mode.items():

@@ -245,6 +245,10 @@ impl FitConfig {
             "hidden_region.model_error_per_rim_residual",
             h.model_error_per_rim_residual,
         )?;
+        non_negative(
+            "hidden_region.rim_residual_floor_mm",
+            h.rim_residual_floor_mm,
+        )?;
         positive("hidden_region.focal_sd", h.focal_sd)?;
         positive("hidden_region.principal_sd_px", h.principal_sd_px)?;
         non_negative(
