@@ -312,8 +312,13 @@ TUNING = [
     (3614, 640, 360, 0.02, 2, None, True),
     (3615, 480, 270, 0.02, 2, None, False),
     (3616, 480, 270, 0.04, 4, None, True),
-]
-TEST = [
+    # The sixteenth (session 2026-12-06, fifteenth; a rim floor, and the calibration judged on
+    # sets drawn like the test set): `--calibrate` on the 208 above chose s 4, e 0.5, k 4,
+    # rho0 0.5, d_c 0.0125, d_u 0.01, u 1, g 0.5 (pooled LSC 94.1 % at 3.68 mm, LS 93.5 % at
+    # 3.56; sets like the test set meeting the issue 80 / 79 %), taken; 3801-3816 were then
+    # reported once (LSC 88.5 % at 3.63 mm, LS 88.5 % at 3.40: 3804 held none of its frames,
+    # its fit 3.9 mm too deep along the ray with a rim under the floor), so they joined the
+    # tuning set; 4001-4016 were fixed as the test set before anything else.
     (3801, 640, 360, 0.03, 2, None, True),
     (3802, 480, 270, 0.04, 2, None, True),
     (3803, 960, 540, 0.02, 2, None, True),
@@ -330,6 +335,24 @@ TEST = [
     (3814, 640, 360, 0.02, 2, None, True),
     (3815, 480, 270, 0.02, 2, None, False),
     (3816, 480, 270, 0.04, 4, None, True),
+]
+TEST = [
+    (4001, 640, 360, 0.03, 2, None, True),
+    (4002, 480, 270, 0.04, 2, None, True),
+    (4003, 960, 540, 0.02, 2, None, True),
+    (4004, 480, 270, 0.05, 2, None, False),
+    (4005, 480, 270, 0.02, 4, None, True),
+    (4006, 640, 360, 0.05, 2, None, True),
+    (4007, 480, 270, 0.03, 2, "case_00023", False),
+    (4008, 960, 540, 0.04, 2, None, True),
+    (4009, 480, 270, 0.03, 2, None, True),
+    (4010, 640, 360, 0.04, 4, None, True),
+    (4011, 480, 270, 0.05, 2, None, True),
+    (4012, 960, 540, 0.03, 2, None, False),
+    (4013, 480, 270, 0.04, 2, "case_00023", True),
+    (4014, 640, 360, 0.02, 2, None, True),
+    (4015, 480, 270, 0.02, 2, None, False),
+    (4016, 480, 270, 0.04, 4, None, True),
 ]
 
 FRAMES = 24
