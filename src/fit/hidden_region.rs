@@ -443,17 +443,9 @@ mod tests {
     use crate::fit::probability::ViewProbabilities;
     use crate::fit::state::apply_increment;
     use crate::geometry::Affine;
-    use crate::synth::{SynthOptions, memory_scene};
 
     fn scene_and_state() -> (crate::scene::Scene, Model, FitState) {
-        let scene = memory_scene(&SynthOptions {
-            frames: 1,
-            width: 240,
-            height: 136,
-            noise: 0.02,
-            ..SynthOptions::default()
-        })
-        .unwrap();
+        let scene = crate::synth::one_small_frame();
         let model = Model::build(&scene).unwrap();
         let truth = scene.ground_truth.trajectory.as_ref().unwrap().frames[0].clone();
         let mut q = [0.0; 12];

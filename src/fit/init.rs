@@ -392,15 +392,7 @@ mod tests {
     /// with the flag clear the same calls place the model.
     #[test]
     fn a_cancelled_placement_or_polish_places_nothing() {
-        use crate::synth::{SynthOptions, memory_scene};
-        let scene = memory_scene(&SynthOptions {
-            frames: 1,
-            width: 240,
-            height: 136,
-            noise: 0.02,
-            ..SynthOptions::default()
-        })
-        .unwrap();
+        let scene = crate::synth::one_small_frame();
         let model = Model::build(&scene).unwrap();
         let appearance = Appearance::for_tests(&scene, 4);
         let config = FitConfig::default();

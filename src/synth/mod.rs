@@ -250,6 +250,19 @@ pub fn demo_options() -> SynthOptions {
     }
 }
 
+/// One 240×136 frame of the phantom with noise 0.02: what the fit's unit tests stand on.
+#[cfg(test)]
+pub(crate) fn one_small_frame() -> Scene {
+    memory_scene(&SynthOptions {
+        frames: 1,
+        width: 240,
+        height: 136,
+        noise: 0.02,
+        ..SynthOptions::default()
+    })
+    .expect("the small phantom builds")
+}
+
 /// Builds a phantom scene in memory (the built-in demo, and tests).
 pub fn memory_scene(options: &SynthOptions) -> Result<Scene, InputError> {
     options

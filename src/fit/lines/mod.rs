@@ -420,7 +420,6 @@ mod tests {
     use crate::fit::probability::ViewProbabilities;
     use crate::fit::state::apply_increment;
     use crate::geometry::Affine;
-    use crate::synth::{SynthOptions, memory_scene};
 
     /// The one-`exp`-per-line Heaviside equals the direct one on every sample, for contour
     /// points near the line and far off it (where e^(±t/w) overflows), on a slanted normal.
@@ -457,14 +456,7 @@ mod tests {
     /// at two pyramid levels, away from the truth so that the gradient is not small.
     #[test]
     fn gradients_match_central_differences() {
-        let scene = memory_scene(&SynthOptions {
-            frames: 1,
-            width: 240,
-            height: 136,
-            noise: 0.02,
-            ..SynthOptions::default()
-        })
-        .unwrap();
+        let scene = crate::synth::one_small_frame();
         let appearance = Appearance::for_tests(&scene, 5);
         let model = Model::build(&scene).unwrap();
         let classes = crate::appearance::ClassMap::from_scene(&scene);
