@@ -17,7 +17,7 @@ began (LS); on the lost frames the growth g. With numpy, the candidates are judg
 set will judge them: on 2000 sets of 16 tuning scenes drawn like the test set (per test scene,
 a tuning scene of its kind), the share of sets whose coverage is 90-98 % with a median radius of
 at most 4 mm, the smaller share of the two modes, ties to the smaller radius (a set's frames miss
-scene by scene, so pooled coverage says too little). Without numpy, the staged search: the
+scene by scene, so pooled coverage says too little; about 40 minutes on 2 cores). Without numpy, the staged search: the
 smallest median radius holding 95 % of the pooled frames, s, e, k, d_c on LSC, then LS's terms.
 The constants are printed, to be made the defaults. The seeds below were fixed before any constant was chosen; the test set is never used to choose. Not part
 of CI: about half a minute per scene and mode on 2 cores.
@@ -482,7 +482,7 @@ def radius95(cov):
         l = np.maximum(np.linalg.eigvalsh(np.array(cov)), 0.0)
         q = np.sort(_Z2 @ l)
         return float(np.sqrt(q[math.ceil(0.95 * len(q)) - 1]))
-    l = [max(v, 0.0) for v in eigenvalues_sym3(cov)]
+    l = sorted(max(v, 0.0) for v in eigenvalues_sym3(cov))  # ascending, as the tracker
     q = sorted(l[0] * x * x + l[1] * y * y + l[2] * z * z for x, y, z in samples())
     return math.sqrt(q[math.ceil(0.95 * len(q)) - 1])
 
@@ -630,14 +630,18 @@ def calibrate_joint(rows_by_mode, config, scenes):
     meet the issue in both modes, coverage 90-98 % with a median radius of at most 4 mm (the
     smaller of the two modes' shares, to 0.01; ties to the smaller mean median radius). Pooled
     frames hide that a set's frames miss scene by scene: 95 % of the pooled frames with a
-    region that does not widen where the fit is worse gave 89.6 % on one test set. `scenes`:
+    region that does not widen where the fit is worse gave 89.6 % on one test set. Every frame
+    counts, lost ones too (with the lost growth g as configured), as the test set counts them.
+    `scenes`:
     each row's "scene" indexes it. Needs numpy; None when no set meets it."""
     import numpy as np
     z2 = np.array(samples()) ** 2
     k95 = math.ceil(0.95 * len(z2)) - 1
-    used = sorted({r["scene"] for rows in rows_by_mode.values() for r in rows if not r["lost"]})
+    used = sorted({r["scene"] for rows in rows_by_mode.values() for r in rows})
     draws = set_draws([scenes[i] for i in used], TEST)
     if draws is None:
+        print("  warning: a kind of test scene has too few tuning scenes to draw sets like the "
+              "test set; falling back to the staged search on pooled frames (no rim floor)")
         return calibrate(rows_by_mode, config)
     draws = np.array(draws)
     column = {scene: i for i, scene in enumerate(used)}
@@ -658,11 +662,15 @@ def calibrate_joint(rows_by_mode, config, scenes):
             "uncorrected": np.array([k == "uncorrected" for k in kinds], dtype=float),
             "zchange2": np.array([(r["zchange"] or 0.0) ** 2 for r in rows]),
             "err": np.array([math.sqrt(sum(v * v for v in r["err"])) for r in rows]),
+            "lost2": np.array([float(r["lost"]) ** 2 for r in rows]),
             "scene": scene, "slot": slot, "width": int(slot.max()) + 1,
         }
 
+    g = config.get("lost_growth_mm_per_frame", 0.0)
+
     def evaluate(p, s, e, k, r0, d_c, d_u, u):
-        diag = e * e + (k * np.maximum(p["rim"] - r0, 0.0)) ** 2
+        # Lost frames count as the test set counts them, with the lost growth g kept.
+        diag = e * e + (k * np.maximum(p["rim"] - r0, 0.0)) ** 2 + g * g * p["lost2"]
         z = p["corrected"] * d_c * d_c + p["uncorrected"] * (d_u * d_u + u * u * p["zchange2"])
         cov = s * p["data"] + diag[:, None, None] * np.eye(3) + z[:, None, None] * p["cc"]
         lam = np.maximum(np.linalg.eigvalsh(cov), 0.0)
@@ -677,19 +685,18 @@ def calibrate_joint(rows_by_mode, config, scenes):
         met = float(np.mean((cover >= 0.90) & (cover <= 0.98) & (median <= 4.0)))
         return round(met, 2), float(np.median(radii))
 
-    tracked = {m: prepared([r for r in rows if not r["lost"]])
-               for m, rows in rows_by_mode.items() if any(not r["lost"] for r in rows)}
-    if set(tracked) != {"LSC", "LS"}:
+    every = {m: prepared(rows) for m, rows in rows_by_mode.items() if rows}
+    if set(every) != {"LSC", "LS"}:
         return calibrate(rows_by_mode, config)
     best = None
     for s in [0.25, 0.5, 1, 2, 4]:
         for e in [0.0, 0.5, 0.75, 1.0]:
             for k in [0.0, 2.0, 4.0, 6.0, 8.0]:
                 for r0 in ([0.0] if k == 0 else [0.0, 0.4, 0.5, 0.6]):
-                    lsc = max(((evaluate(tracked["LSC"], s, e, k, r0, d_c, 0.0, 0.0), d_c)
+                    lsc = max(((evaluate(every["LSC"], s, e, k, r0, d_c, 0.0, 0.0), d_c)
                                for d_c in [0.005, 0.0075, 0.01, 0.0125, 0.015]),
                               key=lambda x: (x[0][0], -x[0][1]))
-                    ls = max(((evaluate(tracked["LS"], s, e, k, r0, 0.0, d_u, u), d_u, u)
+                    ls = max(((evaluate(every["LS"], s, e, k, r0, 0.0, d_u, u), d_u, u)
                               for d_u in [0.0, 0.01, 0.02]
                               for u in [0.5, 1.0, 1.5, 2.0, 2.5]),
                              key=lambda x: (x[0][0], -x[0][1]))
@@ -750,7 +757,8 @@ def main():
             found = (calibrate_joint(chosen_rows, config, sets[name])
                      if search is calibrate_joint else calibrate(chosen_rows, config))
             if found is None:
-                print("  calibration: nothing on the grid reaches 95 %")
+                print("  calibration: nothing on the grid qualifies (sets: none meets 90-98 % "
+                      "at <= 4 mm; staged search: nothing reaches 95 %)")
                 continue
             constants, per_mode, n_lost = found
             print("  calibrated: covariance_scale {s}, model_error_mm {e}, "

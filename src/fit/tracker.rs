@@ -419,6 +419,9 @@ impl<'a> FrameTracker<'a> {
             fit.lines,
         );
         let (fit, lost) = self.placed_afresh_if_lost(t, views, fit, &mut refused);
+        // A cancel inside the fresh placement reads there as "no placement": the frame must
+        // not be reported lost (and a run's last frame finished) on that account.
+        self.cancelled()?;
         let depth_explains_zoom = !correct_cameras
             && !lost
             && (in_zoom

@@ -255,29 +255,32 @@ mod tests {
     #[test]
     fn a_recorded_run_without_a_later_knob_replays_without_it() {
         let c = FitConfig::default();
-        assert!(c.placement.polish_deg > 0.0 && c.placement.initial_polish_deg > 0.0);
+        let defaults = serde_json::to_value(&c).unwrap();
         let mut before = serde_json::to_value(c.resolved(Mode::LSC, 1)).unwrap();
-        let placement = before["fit"]["placement"].as_object_mut().unwrap();
-        placement.remove("polish_deg");
-        placement.remove("initial_polish_deg");
+        let mut own = defaults.clone();
+        for (section, key, then) in BEFORE_IT_EXISTED {
+            assert_ne!(
+                defaults[section][key].as_f64(),
+                Some(then),
+                "{section}.{key}: today's default is what the fit did before"
+            );
+            for config in [&mut before["fit"], &mut own] {
+                config[section].as_object_mut().unwrap().remove(key);
+            }
+        }
         let metrics = serde_json::json!({ "mode": "LSC", "timing": {}, "config": before });
         let run = RecordedRun::from_json(&metrics.to_string()).unwrap();
-        assert_eq!(
-            (
-                run.config.placement.polish_deg,
-                run.config.placement.initial_polish_deg
-            ),
-            (0.0, 0.0)
-        );
         assert_eq!(run.config.placement.refined, c.placement.refined);
-        let mut own = serde_json::to_value(&run.config).unwrap();
-        let placement = own["placement"].as_object_mut().unwrap();
-        placement.remove("polish_deg");
-        placement.remove("initial_polish_deg");
+        let replayed = serde_json::to_value(&run.config).unwrap();
         let own = RecordedRun::from_json(&own.to_string()).unwrap().config;
-        assert_eq!(
-            (own.placement.polish_deg, own.placement.initial_polish_deg),
-            (c.placement.polish_deg, c.placement.initial_polish_deg)
-        );
+        let own = serde_json::to_value(&own).unwrap();
+        for (section, key, then) in BEFORE_IT_EXISTED {
+            assert_eq!(
+                replayed[section][key].as_f64(),
+                Some(then),
+                "{section}.{key}"
+            );
+            assert_eq!(own[section][key], defaults[section][key], "{section}.{key}");
+        }
     }
 }
