@@ -68,9 +68,7 @@ pub fn run(
     let results: Vec<(usize, Vec<Option<f64>>)> = jobs
         .par_iter()
         .map(|&(t, c)| -> Result<_, Error> {
-            if cancel.is_some_and(|f| f.load(Ordering::Relaxed)) {
-                return Err(Error::Cancelled);
-            }
+            crate::error::stop_if_cancelled(cancel)?;
             let frame = scene.frame(c, t)?;
             let maps = model.classify_frame(&frame);
             let cam = &scene.cameras[c].name;

@@ -3,6 +3,7 @@
 //! and the app can show it without losing anything the user made.
 
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// A problem with something the user supplied: a file, a folder or a value in one.
 #[derive(Debug, Clone, thiserror::Error, PartialEq)]
@@ -49,6 +50,16 @@ pub enum Error {
 }
 
 pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// Err(Cancelled) once the user set `cancel`: long work reads it between its pieces, and a
+/// piece cut short is not a result.
+pub fn stop_if_cancelled(cancel: Option<&AtomicBool>) -> Result<()> {
+    if cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
+        Err(Error::Cancelled)
+    } else {
+        Ok(())
+    }
+}
 
 /// Shorthand for an [`InputError`] wrapped in [`Error`].
 pub fn input_err(path: impl AsRef<Path>, problem: impl Into<String>) -> Error {

@@ -23,7 +23,7 @@ use image::RgbImage;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 use std::sync::{Arc, Mutex};
 
 /// Most training pixels kept per class (deterministic thinning beyond): painting a whole frame
@@ -454,9 +454,7 @@ fn collect_grouped(
     let per_job: Vec<Result<Arc<Vec<Sample>>, Error>> = jobs
         .par_iter()
         .map(|&(c, t)| {
-            if cancel.is_some_and(|f| f.load(Ordering::Relaxed)) {
-                return Err(Error::Cancelled);
-            }
+            crate::error::stop_if_cancelled(cancel)?;
             let seeds = &scene.seeds.by_camera[c][&t];
             let hash = strokes_hash(seeds);
             if let Some(hit) = cache.and_then(|k| k.get((c, t), hash)) {

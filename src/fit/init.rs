@@ -17,7 +17,7 @@ use super::optimizer::fit_frame;
 use super::probability::ViewProbabilities;
 use crate::appearance::features::downsample;
 use crate::appearance::{Appearance, ClassMap};
-use crate::error::{Error, InputError};
+use crate::error::{Error, InputError, stop_if_cancelled};
 use crate::geometry::pose::rotation_from_vector;
 use crate::geometry::{Affine, Camera};
 use crate::plane::Plane;
@@ -25,7 +25,7 @@ use crate::render::raster::{RasterOptions, ViewRaster, rasterize};
 use crate::scene::Scene;
 use glam::{DMat3, DVec2, DVec3};
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 
 /// Unit directions spread over the sphere (Fibonacci lattice).
 fn directions(n: usize) -> Vec<DVec3> {
@@ -175,7 +175,7 @@ pub fn automatic_pose(
     let mut scored: Vec<(f64, Affine)> = Vec::new();
     let roll_angle = std::f64::consts::TAU / placement.rolls.max(1) as f64;
     for d in directions(placement.directions) {
-        refiner.cancelled()?;
+        stop_if_cancelled(refiner.cancel)?;
         for roll in 0..placement.rolls {
             let rot = rotation_from_vector(d * (roll as f64 * roll_angle)) * align_z(d);
             // Depth from the area: projected area falls with the square of depth.
@@ -321,17 +321,8 @@ impl<'a> Refiner<'a> {
         })
     }
 
-    /// Err(Cancelled) once the user cancelled: a placement cut short places nothing.
-    fn cancelled(&self) -> Result<(), Error> {
-        if self.cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
-            Err(Error::Cancelled)
-        } else {
-            Ok(())
-        }
-    }
-
     fn refine(&mut self, affine: Affine) -> Result<(), Error> {
-        self.cancelled()?;
+        stop_if_cancelled(self.cancel)?;
         let start = super::tracker::initial_state(self.scene, self.ctx.model, affine);
         let fit = fit_frame(
             &self.ctx,

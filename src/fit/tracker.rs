@@ -23,7 +23,7 @@ use crate::render::raster::{RasterOptions, rasterize};
 use crate::scene::Scene;
 use glam::DVec3;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 
 /// Too few lines or too little confidence: the organ is not where the fit put it.
 fn is_lost(fit: &FrameFit, tracking: &TrackingConfig) -> bool {
@@ -310,11 +310,7 @@ struct Outcome {
 impl<'a> FrameTracker<'a> {
     /// Err(Cancelled) once the user cancelled: a fit cut short is not a result.
     fn cancelled(&self) -> Result<(), Error> {
-        if self.cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
-            Err(Error::Cancelled)
-        } else {
-            Ok(())
-        }
+        crate::error::stop_if_cancelled(self.cancel)
     }
 
     /// The last good state with its pose carried on to frame `t` by the motion before it: where
