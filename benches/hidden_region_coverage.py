@@ -335,8 +335,13 @@ TUNING = [
     (3814, 640, 360, 0.02, 2, None, True),
     (3815, 480, 270, 0.02, 2, None, False),
     (3816, 480, 270, 0.04, 4, None, True),
-]
-TEST = [
+    # The seventeenth (session 2026-12-06, sixteenth; the region balanced between frames under a
+    # zoom and the others): `--calibrate` on the 224 above chose s 4, e 0.875, k 4, rho0 0.6,
+    # d_c 0.0075, d_u 0, u 1, g 0.5 (pooled LSC 95.0 % at 3.21 mm, LS 95.3 % at 3.09; sets like
+    # the test set meeting the issue 68 / 78 %), taken; 4001-4016 were then reported once (LSC
+    # 88.3 % at 3.16 mm, LS 91.4 % at 3.03: 4007, KiTS case_00023 without a zoom, held none of
+    # its frames, 4001 3 of 24), so they joined the tuning set; 4201-4216 were fixed as the test
+    # set before anything else.
     (4001, 640, 360, 0.03, 2, None, True),
     (4002, 480, 270, 0.04, 2, None, True),
     (4003, 960, 540, 0.02, 2, None, True),
@@ -353,6 +358,24 @@ TEST = [
     (4014, 640, 360, 0.02, 2, None, True),
     (4015, 480, 270, 0.02, 2, None, False),
     (4016, 480, 270, 0.04, 4, None, True),
+]
+TEST = [
+    (4201, 640, 360, 0.03, 2, None, True),
+    (4202, 480, 270, 0.04, 2, None, True),
+    (4203, 960, 540, 0.02, 2, None, True),
+    (4204, 480, 270, 0.05, 2, None, False),
+    (4205, 480, 270, 0.02, 4, None, True),
+    (4206, 640, 360, 0.05, 2, None, True),
+    (4207, 480, 270, 0.03, 2, "case_00023", False),
+    (4208, 960, 540, 0.04, 2, None, True),
+    (4209, 480, 270, 0.03, 2, None, True),
+    (4210, 640, 360, 0.04, 4, None, True),
+    (4211, 480, 270, 0.05, 2, None, True),
+    (4212, 960, 540, 0.03, 2, None, False),
+    (4213, 480, 270, 0.04, 2, "case_00023", True),
+    (4214, 640, 360, 0.02, 2, None, True),
+    (4215, 480, 270, 0.02, 2, None, False),
+    (4216, 480, 270, 0.04, 4, None, True),
 ]
 
 FRAMES = 24
@@ -598,6 +621,11 @@ def calibrate(rows_by_mode, config):
     return with_lost_growth(base, rows_by_mode)
 
 
+# A 95 % region must hold about 95 % whether or not the cameras zoomed (pooled tuning frames
+# of each condition, each mode): `calibrate_joint` takes nothing outside this.
+BALANCED = (0.93, 0.97)
+
+
 def kind_of_scene(spec):
     """What makes a scene's frames miss together: a KiTS patient's shape, a zoom, four views."""
     return (spec[5] is not None, spec[6], spec[4] == 4)
@@ -630,13 +658,21 @@ def calibrate_joint(rows_by_mode, config, scenes):
     meet the issue in both modes, coverage 90-98 % with a median radius of at most 4 mm (the
     smaller of the two modes' shares, to 0.01; ties to the smaller mean median radius). Pooled
     frames hide that a set's frames miss scene by scene: 95 % of the pooled frames with a
-    region that does not widen where the fit is worse gave 89.6 % on one test set. Every frame
-    counts, lost ones too (with the lost growth g as configured), as the test set counts them.
-    `scenes`:
-    each row's "scene" indexes it. Needs numpy; None when no set meets it."""
+    region that does not widen where the fit is worse gave 89.6 % on one test set.
+
+    Only constants whose region is calibrated whether or not the cameras zoomed qualify: in
+    each mode, the pooled tuning frames under a zoom and those before or without one must each
+    hold the truth in `BALANCED` (93-97 %). Without it the sets' share was highest for a region
+    too wide under a zoom and too narrow without one (224 tuning scenes, LSC: 98.6 % of the
+    zoomed frames at 4.0 mm, 88.0 % of the others at 2.1 mm), a 95 % region that held 88 % in
+    the commonest case.
+
+    The grid is screened with the first 1024 of the tracker's normal samples and the best
+    candidates judged again with all of them. Every frame counts, lost ones too (with the lost
+    growth g as configured), as the test set counts them. `scenes`: each row's "scene" indexes
+    it. Needs numpy; None when no set meets it."""
     import numpy as np
-    z2 = np.array(samples()) ** 2
-    k95 = math.ceil(0.95 * len(z2)) - 1
+    every_z2 = np.array(samples()) ** 2
     used = sorted({r["scene"] for rows in rows_by_mode.values() for r in rows})
     draws = set_draws([scenes[i] for i in used], TEST)
     if draws is None:
@@ -660,6 +696,7 @@ def calibrate_joint(rows_by_mode, config, scenes):
             "cc": np.array([np.outer(r["c"], r["c"]) for r in rows]),
             "corrected": np.array([k == "corrected" for k in kinds], dtype=float),
             "uncorrected": np.array([k == "uncorrected" for k in kinds], dtype=float),
+            "zoomed": np.array([k is not None for k in kinds]),
             "zchange2": np.array([(r["zchange"] or 0.0) ** 2 for r in rows]),
             "err": np.array([math.sqrt(sum(v * v for v in r["err"])) for r in rows]),
             "lost2": np.array([float(r["lost"]) ** 2 for r in rows]),
@@ -668,15 +705,21 @@ def calibrate_joint(rows_by_mode, config, scenes):
 
     g = config.get("lost_growth_mm_per_frame", 0.0)
 
-    def evaluate(p, s, e, k, r0, d_c, d_u, u):
+    def evaluate(p, z2, s, e, k, r0, d_c, d_u, u):
+        """(share of sets meeting the issue, median radius) or None when unbalanced."""
+        k95 = math.ceil(0.95 * len(z2)) - 1
         # Lost frames count as the test set counts them, with the lost growth g kept.
         diag = e * e + (k * np.maximum(p["rim"] - r0, 0.0)) ** 2 + g * g * p["lost2"]
         z = p["corrected"] * d_c * d_c + p["uncorrected"] * (d_u * d_u + u * u * p["zchange2"])
         cov = s * p["data"] + diag[:, None, None] * np.eye(3) + z[:, None, None] * p["cc"]
         lam = np.maximum(np.linalg.eigvalsh(cov), 0.0)
         radii = np.sqrt(np.partition(lam @ z2.T, k95, axis=1)[:, k95])
+        inside = p["err"] <= radii
+        for part in (p["zoomed"], ~p["zoomed"]):
+            if part.any() and not BALANCED[0] <= inside[part].mean() <= BALANCED[1]:
+                return None
         n = len(used)
-        held = np.bincount(p["scene"], p["err"] <= radii, minlength=n)
+        held = np.bincount(p["scene"], inside, minlength=n)
         count = np.bincount(p["scene"], minlength=n)
         by_scene = np.full((n, p["width"]), np.nan)
         by_scene[p["scene"], p["slot"]] = radii
@@ -688,29 +731,45 @@ def calibrate_joint(rows_by_mode, config, scenes):
     every = {m: prepared(rows) for m, rows in rows_by_mode.items() if rows}
     if set(every) != {"LSC", "LS"}:
         return calibrate(rows_by_mode, config)
-    best = None
+
+    def best_of(mode, z2, base, options):
+        judged = [(evaluate(every[mode], z2, *base, *o), o) for o in options]
+        judged = [(j, o) for j, o in judged if j is not None]
+        return max(judged, key=lambda x: (x[0][0], -x[0][1])) if judged else None
+
+    lsc_options = [(d_c, 0.0, 0.0) for d_c in [0.0025, 0.005, 0.0075, 0.01, 0.0125, 0.015]]
+    ls_options = [(0.0, d_u, u) for d_u in [0.0, 0.01, 0.02]
+                  for u in [0.5, 0.75, 1.0, 1.25, 1.5, 2.0, 2.5]]
+
+    def judged(z2, base, lsc_opts, ls_opts):
+        lsc = best_of("LSC", z2, base, lsc_opts)
+        ls = best_of("LS", z2, base, ls_opts)
+        if lsc is None or ls is None:
+            return None
+        score = (min(lsc[0][0], ls[0][0]), -0.5 * (lsc[0][1] + ls[0][1]))
+        return score, base, lsc, ls
+
+    screened = []
     for s in [0.25, 0.5, 1, 2, 4]:
-        for e in [0.0, 0.5, 0.75, 1.0]:
+        for e in [0.0, 0.25, 0.5, 0.625, 0.75, 0.875, 1.0]:
             for k in [0.0, 2.0, 4.0, 6.0, 8.0]:
                 for r0 in ([0.0] if k == 0 else [0.0, 0.4, 0.5, 0.6]):
-                    lsc = max(((evaluate(every["LSC"], s, e, k, r0, d_c, 0.0, 0.0), d_c)
-                               for d_c in [0.005, 0.0075, 0.01, 0.0125, 0.015]),
-                              key=lambda x: (x[0][0], -x[0][1]))
-                    ls = max(((evaluate(every["LS"], s, e, k, r0, 0.0, d_u, u), d_u, u)
-                              for d_u in [0.0, 0.01, 0.02]
-                              for u in [0.5, 1.0, 1.5, 2.0, 2.5]),
-                             key=lambda x: (x[0][0], -x[0][1]))
-                    score = (min(lsc[0][0], ls[0][0]), -0.5 * (lsc[0][1] + ls[0][1]))
-                    if best is None or score > best[0]:
-                        best = (score, {"s": s, "e": e, "k": k, "r0": r0, "d_c": lsc[1],
-                                        "d_u": ls[1], "u": ls[2],
-                                        "g": config.get("lost_growth_mm_per_frame", 0.0)},
-                                (lsc[0][0], ls[0][0]))
+                    found = judged(every_z2[:1024], (s, e, k, r0), lsc_options, ls_options)
+                    if found is not None:
+                        screened.append(found)
+    screened.sort(key=lambda x: x[0], reverse=True)
+    best = None
+    for _, base, _, _ in screened[:12]:
+        found = judged(every_z2, base, lsc_options, ls_options)
+        if found is not None and (best is None or found[0] > best[0]):
+            best = found
     if best is None or best[0][0] <= 0.0:
         return None
-    print(f"  sets like the test set meeting the issue: LSC {100 * best[2][0]:.0f} %, "
-          f"LS {100 * best[2][1]:.0f} % of {len(draws)}")
-    return with_lost_growth(best[1], rows_by_mode)
+    (score, (s, e, k, r0), lsc, ls) = best
+    print(f"  sets like the test set meeting the issue: LSC {100 * lsc[0][0]:.0f} %, "
+          f"LS {100 * ls[0][0]:.0f} % of {len(draws)}")
+    return with_lost_growth({"s": s, "e": e, "k": k, "r0": r0, "d_c": lsc[1][0],
+                             "d_u": ls[1][1], "u": ls[1][2], "g": g}, rows_by_mode)
 
 
 def main():

@@ -4,7 +4,7 @@
 mod common;
 
 use endofuse::geometry::Affine;
-use endofuse::geometry::pose::{nearest_rotation, rotation_from_vector, rotation_to_vector};
+use endofuse::geometry::pose::{nearest_rotation, rotation_to_vector};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -504,13 +504,10 @@ fn a_given_pose_in_a_wrong_basin_is_polished_towards_the_truth() {
     let centre: [f64; 3] = serde_json::from_value(truth["centroids"]["kidney"].clone()).unwrap();
     let centre = glam::DVec3::from(centre);
     let truth_pose = affine_of(&truth["affine"]);
-    let turn = rotation_from_vector(glam::DVec3::X * 12f64.to_radians());
-    let given = Affine::from_linear_translation(
-        turn * truth_pose.linear(),
-        turn * truth_pose.translation_mm() + centre - turn * centre,
-    )
-    .q
-    .to_vec();
+    let given =
+        endofuse::fit::init::turned_about(&truth_pose, centre, glam::DVec3::X * 12f64.to_radians())
+            .q
+            .to_vec();
     common::edit_json(&scene, |s| {
         s["initial_pose"] = serde_json::json!({ "affine": given });
     });

@@ -80,7 +80,7 @@ fn soft_iou(prob: &Plane<f32>, silhouette: &Plane<bool>) -> f64 {
 
 /// `affine` followed by the rotation `turn` (axis × angle, camera coordinates) about the
 /// camera-space point `centre`.
-fn turned_about(affine: &Affine, centre: DVec3, turn: DVec3) -> Affine {
+pub fn turned_about(affine: &Affine, centre: DVec3, turn: DVec3) -> Affine {
     let r = rotation_from_vector(turn);
     Affine::from_linear_translation(
         r * affine.linear(),
