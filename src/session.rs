@@ -91,6 +91,7 @@ impl FrameResult {
                     covariance_mm2: e.centroid_cov_mm2,
                     radius_mm: e.radius95_mm,
                     rim_residual_mm: e.rim_residual_mm.unwrap_or(0.0),
+                    fit_confidence: e.fit_confidence.unwrap_or(1.0),
                     zoom_depth_sd: e.zoom_depth_sd.unwrap_or(0.0),
                     zoom_depth_change: e.zoom_depth_change,
                     margin: match (e.surface_mm, e.depth_mm, e.margin95_mm) {

@@ -646,6 +646,7 @@ pub fn track(
                 &tracker.ctx,
                 &state,
                 info,
+                fit.confidence,
                 tracker.zoom_history,
                 &options.config.hidden_region,
             );

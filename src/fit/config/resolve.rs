@@ -185,13 +185,15 @@ pub enum ConfigFileError {
 /// own still gets). Knobs added earlier (e.g. `zoom.detector.warmup_frames`,
 /// `tracking.reinit_max_jump_mm`) are not listed: a metrics.json from before them replays
 /// with today's value. Every knob added from now on with such a default belongs here.
-const BEFORE_IT_EXISTED: [(&str, &str, f64); 3] = [
+const BEFORE_IT_EXISTED: [(&str, &str, f64); 4] = [
     // 2026-12-06, thirteenth session.
     ("placement", "polish_deg", 0.0),
     // 2026-12-06, fourteenth session.
     ("placement", "initial_polish_deg", 0.0),
     // 2026-12-06, fifteenth session.
     ("hidden_region", "rim_residual_floor_mm", 0.0),
+    // 2026-12-06, sixteenth session.
+    ("hidden_region", "model_error_per_confidence_shortfall", 0.0),
 ];
 
 /// What `track --config` reads: a configuration, and where the file is a run's metrics.json,

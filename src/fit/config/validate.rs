@@ -249,6 +249,15 @@ impl FitConfig {
             "hidden_region.rim_residual_floor_mm",
             h.rim_residual_floor_mm,
         )?;
+        non_negative(
+            "hidden_region.model_error_per_confidence_shortfall",
+            h.model_error_per_confidence_shortfall,
+        )?;
+        within(
+            "hidden_region.confidence_full",
+            h.confidence_full,
+            0.0..=1.0,
+        )?;
         positive("hidden_region.focal_sd", h.focal_sd)?;
         positive("hidden_region.principal_sd_px", h.principal_sd_px)?;
         non_negative(
