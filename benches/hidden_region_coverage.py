@@ -358,8 +358,14 @@ TUNING = [
     (4014, 640, 360, 0.02, 2, None, True),
     (4015, 480, 270, 0.02, 2, None, False),
     (4016, 480, 270, 0.04, 4, None, True),
-]
-TEST = [
+    # The eighteenth (the same session): the fit's confidence widens the region, and the
+    # calibration also asks frames under and over a confidence of 0.7 to hold 93-97 %;
+    # `--calibrate` on the 240 above chose s 1, e 0.875, k 0, q 4, c0 0.8, d_c 0.0075, d_u 0,
+    # u 0.75, g 0.5 (pooled LSC 95.3 % at 3.18 mm, LS 95.3 % at 3.06; sets like the test set
+    # meeting the issue 61 / 70 %), taken; 4201-4216 were then reported once (LSC 90.9 % at
+    # 3.15 mm, LS 91.4 % at 3.21: met; 4207, KiTS case_00023 without a zoom, held none of its
+    # frames), so they joined the tuning set; 4401-4416 were fixed as the test set before
+    # anything else.
     (4201, 640, 360, 0.03, 2, None, True),
     (4202, 480, 270, 0.04, 2, None, True),
     (4203, 960, 540, 0.02, 2, None, True),
@@ -376,6 +382,24 @@ TEST = [
     (4214, 640, 360, 0.02, 2, None, True),
     (4215, 480, 270, 0.02, 2, None, False),
     (4216, 480, 270, 0.04, 4, None, True),
+]
+TEST = [
+    (4401, 640, 360, 0.03, 2, None, True),
+    (4402, 480, 270, 0.04, 2, None, True),
+    (4403, 960, 540, 0.02, 2, None, True),
+    (4404, 480, 270, 0.05, 2, None, False),
+    (4405, 480, 270, 0.02, 4, None, True),
+    (4406, 640, 360, 0.05, 2, None, True),
+    (4407, 480, 270, 0.03, 2, "case_00023", False),
+    (4408, 960, 540, 0.04, 2, None, True),
+    (4409, 480, 270, 0.03, 2, None, True),
+    (4410, 640, 360, 0.04, 4, None, True),
+    (4411, 480, 270, 0.05, 2, None, True),
+    (4412, 960, 540, 0.03, 2, None, False),
+    (4413, 480, 270, 0.04, 2, "case_00023", True),
+    (4414, 640, 360, 0.02, 2, None, True),
+    (4415, 480, 270, 0.02, 2, None, False),
+    (4416, 480, 270, 0.04, 4, None, True),
 ]
 
 FRAMES = 24
