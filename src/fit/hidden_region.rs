@@ -6,13 +6,17 @@
 //! weights and the pose along directions they barely see. The joint information of the fit
 //! ([`super::information`]) with the calibration's prior on the intrinsics is inverted and
 //! propagated linearly to the centroid, and what the images cannot know is added:
-//! Σ = s · J H⁻¹ Jᵀ + (e² + (k · max(0, ρ − ρ₀))²) I + d² c cᵀ, ρ the fit's unexplained rim. The constants are calibrated on synthetic scenes with
-//! truth (`benches/hidden_region_coverage.py`, tuning seeds apart from the seeds it reports):
-//! s, because neighbouring correspondence lines are not independent; e, the deformation the
-//! shape catalog does not span (a real organ is not one of the model's instances), and k, how
-//! much more of it there is where the fitted rim stays off the image's edges; d, after a
-//! zoom, the relative depth along the centroid's ray c from camera 0 (zooming in and coming
-//! closer look alike, and what focal-length error the zoom left stays).
+//! Σ = s · J H⁻¹ Jᵀ + (e² + (k · max(0, ρ − ρ₀))² + (q · max(0, c₀ − κ))²) I + d² c cᵀ, ρ the
+//! fit's unexplained rim, κ its confidence; a lost frame keeps the last good frame's region,
+//! each axis widened by g per frame lost. The constants are calibrated on synthetic scenes
+//! with truth (`benches/hidden_region_coverage.py`, tuning seeds apart from the seeds it
+//! reports): s, because neighbouring correspondence lines are not independent; e, the
+//! deformation the shape catalog does not span (a real organ is not one of the model's
+//! instances); k, how much more of it there is where the fitted rim stays off the image's
+//! edges (0 by default since 2026-12-06: the confidence served better), and q, where the fit
+//! is less sure of its contours; d, after a zoom, the relative depth along the centroid's ray
+//! c from camera 0 (zooming in and coming closer look alike, and what focal-length error the
+//! zoom left stays).
 
 use super::context::FrameContext;
 use super::information::{CAMERA_COLUMNS, Information};
@@ -52,8 +56,10 @@ pub struct HiddenRegionConfig {
     /// region without this term) frames under a confidence of 0.6 held the truth in 87 % of
     /// frames and those over 0.8 in 98 %, their errors 1.95 and 1.02 mm (medians).
     pub model_error_per_confidence_shortfall: f64,
-    /// c₀: the fit's confidence (`fit::lines::target::structure_confidence`, before a
-    /// depth-for-zoom frame's report is lowered) at and above which it adds nothing.
+    /// c₀: the fit's confidence (`FrameFit::confidence`, the mean over its lines of the
+    /// forest's probability just inside minus just outside the contour,
+    /// `fit::lines::target::confidence`; before a depth-for-zoom frame's report is lowered) at
+    /// and above which it adds nothing.
     pub confidence_full: f64,
     /// The prior on the shared focal length in the information (relative standard
     /// deviation): the cameras as calibrated.
@@ -77,8 +83,9 @@ pub struct HiddenRegionConfig {
     pub probability: f64,
     /// A lost frame keeps the last good state while the organ moves on: its region widens by
     /// this per-axis standard deviation (mm) per frame lost. Calibrated on the lost frames
-    /// of the tuning scenes (124 of them on 2026-12-06, 160 in the fifteenth session: the
-    /// smallest growth tried, 0.5 mm, held 95 % of them); the frame is marked lost.
+    /// of the tuning scenes (124 of them on 2026-12-06, 160 in the fifteenth session, 179 in
+    /// the sixteenth: the smallest growth tried, 0.5 mm, held 95 % of them); the frame is
+    /// marked lost.
     pub lost_growth_mm_per_frame: f64,
 }
 
@@ -93,8 +100,9 @@ impl Default for HiddenRegionConfig {
             // set most often hold the truth in 90-98 % of their frames with a median radius of
             // at most 4 mm in both modes (61 % of the sets in LSC, 70 % in LS). Pooled: LSC
             // 95.3 % at 3.18 mm, LS 95.3 % at 3.06 mm. The fit's confidence took the place of
-            // the unexplained rim (k 0). The record of every calibration, and what each gave
-            // on its test set: docs/HIDDEN_REGION_CALIBRATION.md.
+            // the unexplained rim (k 0; ρ₀ is kept at 0.6, inert while k is 0). The record of
+            // every calibration, and what each gave on its test set:
+            // docs/HIDDEN_REGION_CALIBRATION.md.
             covariance_scale: 1.0,
             model_error_mm: 0.875,
             model_error_per_rim_residual: 0.0,
@@ -232,6 +240,12 @@ pub fn hidden_regions(
     if hidden.is_empty() {
         return Vec::new();
     }
+    // A confidence that is not a number says nothing of the fit: the widest region.
+    let confidence = if confidence.is_finite() {
+        confidence
+    } else {
+        0.0
+    };
     let covariance = parameter_covariance(state, info, config);
     let deformed = model.deformed(&state.shape);
     let posed: Vec<DVec3> = hidden
@@ -706,7 +720,7 @@ mod tests {
     }
 
     /// A fit less confident than c₀ widens the region by q per unit short of it, one at or
-    /// above c₀ not at all; the tracker passes the fit's own confidence.
+    /// above c₀ not at all.
     #[test]
     fn model_error_grows_as_the_fit_is_less_confident() {
         let c = HiddenRegionConfig {

@@ -112,7 +112,9 @@ pub struct HiddenRegionEntry {
     /// The fit's unexplained rim at the centroid's depth (mm), which widens the region.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub rim_residual_mm: Option<f64>,
-    /// The fit's own confidence, which widens the region where it is low.
+    /// The fit's own confidence, which widens the region where it is low (before a
+    /// depth-for-zoom frame's reported confidence is halved; a lost frame keeps the last good
+    /// frame's).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fit_confidence: Option<f64>,
     /// The relative standard deviation of depth along camera 0's ray that a zoom added

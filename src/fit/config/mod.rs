@@ -579,6 +579,8 @@ mod tests {
             r#"{"solver": {"lm_floor": -1}}"#,
             r#"{"tracking": {"max_fit_level": 30}}"#,
             r#"{"stereo": {"half_window": 0}}"#,
+            r#"{"hidden_region": {"confidence_full": 1.5}}"#,
+            r#"{"hidden_region": {"model_error_per_confidence_shortfall": -1}}"#,
         ] {
             let parsed: FitConfig = serde_json::from_str(bad).unwrap();
             let err = parsed.validate().unwrap_err();
