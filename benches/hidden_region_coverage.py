@@ -559,22 +559,35 @@ def zoom_kind(row):
     return "corrected" if row["zsd"] > 0 else None
 
 
+def constants_of(config):
+    """The region's constants a run's metrics.json config names, by their short names (a
+    knob missing there is one that run did not have: its value then)."""
+    return {"s": config.get("covariance_scale", 1.0), "e": config.get("model_error_mm", 0.0),
+            "k": config.get("model_error_per_rim_residual", 0.0),
+            "r0": config.get("rim_residual_floor_mm", 0.0),
+            "q": config.get("model_error_per_confidence_shortfall", 0.0),
+            "c0": config.get("confidence_full", 1.0),
+            "d_c": config.get("zoom_depth_sd_corrected", 0.0),
+            "d_u": config.get("zoom_depth_sd_uncorrected", 0.0),
+            "u": config.get("zoom_depth_per_depth_change", 0.0),
+            "g": config.get("lost_growth_mm_per_frame", 0.0)}
+
+
+def model_variance(row, e, k, r0, q, c0, g):
+    """The per-axis variance (mm²) the constants add to a row: e² + (k · max(0, rim − ρ₀))² +
+    (q · max(0, c₀ − conf))² + (g · n)², n frames into a loss."""
+    return e * e + (k * max(row["rim"] - r0, 0.0)) ** 2 + (q * max(c0 - row["conf"], 0.0)) ** 2 \
+        + (g * row["lost"]) ** 2
+
+
 def data_part(row, config):
     """The covariance the fit's information gives (before the constants), taken back out of
-    what the tracker wrote: Σ = s · data + (e² + (k · max(0, rim − ρ₀))² + (q · max(0, c₀ −
-    conf))² + (g · n)²) I + zsd² c cᵀ, n frames into a loss (a lost frame keeps the last good
-    frame's data part, rim, confidence and zoom terms)."""
-    s = config.get("covariance_scale", 1.0)
-    e = config.get("model_error_mm", 0.0)
-    k = config.get("model_error_per_rim_residual", 0.0)
-    r0 = config.get("rim_residual_floor_mm", 0.0)
-    q = config.get("model_error_per_confidence_shortfall", 0.0)
-    c0 = config.get("confidence_full", 1.0)
-    g = config.get("lost_growth_mm_per_frame", 0.0)
-    diag = e * e + (k * max(row["rim"] - r0, 0.0)) ** 2 + (q * max(c0 - row["conf"], 0.0)) ** 2 \
-        + (g * row["lost"]) ** 2
+    what the tracker wrote: Σ = s · data + model_variance I + zsd² c cᵀ (a lost frame keeps
+    the last good frame's data part, rim, confidence and zoom terms)."""
+    k = constants_of(config)
+    diag = model_variance(row, k["e"], k["k"], k["r0"], k["q"], k["c0"], k["g"])
     c, z = row["c"], row["zsd"]
-    return [[(row["cov"][i][j] - (diag if i == j else 0) - z * z * c[i] * c[j]) / s
+    return [[(row["cov"][i][j] - (diag if i == j else 0) - z * z * c[i] * c[j]) / k["s"]
              for j in range(3)] for i in range(3)]
 
 
@@ -589,8 +602,7 @@ def rebuilt(row, s, e, k, r0, d_c, d_u, u, g, q=0.0, c0=1.0):
         z2 = d_u * d_u + (u * row["zchange"]) ** 2
     else:
         z2 = 0.0
-    diag = e * e + (k * max(row["rim"] - r0, 0.0)) ** 2 + (q * max(c0 - row["conf"], 0.0)) ** 2 \
-        + (g * row["lost"]) ** 2
+    diag = model_variance(row, e, k, r0, q, c0, g)
     return [[s * row["data"][i][j] + (diag if i == j else 0) + z2 * c[i] * c[j]
              for j in range(3)] for i in range(3)]
 
@@ -641,15 +653,7 @@ def with_lost_growth(base, rows_by_mode):
 def calibrate(rows_by_mode, config):
     """LSC: s, e, k, d_c on its tracked frames; LS: d_u and u with those kept; then g on the
     lost frames of both. Returns the constants and what they give per mode."""
-    base = {"s": config.get("covariance_scale", 1.0), "e": config.get("model_error_mm", 0.0),
-            "k": config.get("model_error_per_rim_residual", 0.0),
-            "r0": config.get("rim_residual_floor_mm", 0.0),
-            "q": config.get("model_error_per_confidence_shortfall", 0.0),
-            "c0": config.get("confidence_full", 1.0),
-            "d_c": config.get("zoom_depth_sd_corrected", 0.0),
-            "d_u": config.get("zoom_depth_sd_uncorrected", 0.0),
-            "u": config.get("zoom_depth_per_depth_change", 0.0),
-            "g": config.get("lost_growth_mm_per_frame", 0.0)}
+    base = constants_of(config)
     tracked = {m: [r for r in rows if not r["lost"]] for m, rows in rows_by_mode.items()}
     if "LSC" in tracked:
         found = smallest(tracked["LSC"], {
@@ -787,9 +791,9 @@ def calibrate_joint(rows_by_mode, config, scenes):
         return calibrate(rows_by_mode, config)
 
     def best_of(mode, z2, base, options):
-        judged = [(evaluate(every[mode], z2, *base, *o), o) for o in options]
-        judged = [(j, o) for j, o in judged if j is not None]
-        return max(judged, key=lambda x: (x[0][0], -x[0][1])) if judged else None
+        scored = [(evaluate(every[mode], z2, *base, *o), o) for o in options]
+        scored = [(j, o) for j, o in scored if j is not None]
+        return max(scored, key=lambda x: (x[0][0], -x[0][1])) if scored else None
 
     # LSC candidates carry no uncorrected-zoom term: LSC corrects every zoom it meets (its
     # tuning frames have none the pose alone followed).
