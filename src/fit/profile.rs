@@ -37,9 +37,13 @@ pub enum Phase {
     NormalEquations,
     /// Inside the steps: evaluations of the objective (trial states).
     Objective,
+    /// Inside stereo matching: the matching images (grey, smoothed) of every view.
+    StereoImages,
+    /// Inside stereo matching: the epipolar searches of every point.
+    StereoSearch,
 }
 
-const PHASES: [(Phase, &str); 14] = [
+const PHASES: [(Phase, &str); 16] = [
     (Phase::Frame, "whole frame"),
     (Phase::Pyramid, "pyramids"),
     (Phase::Lines, "lines in all"),
@@ -54,9 +58,11 @@ const PHASES: [(Phase, &str); 14] = [
     (Phase::Information, "information"),
     (Phase::NormalEquations, "normal equations"),
     (Phase::Objective, "objective"),
+    (Phase::StereoImages, "stereo images"),
+    (Phase::StereoSearch, "stereo search"),
 ];
 
-static NANOS: [AtomicU64; 14] = [const { AtomicU64::new(0) }; 14];
+static NANOS: [AtomicU64; PHASES.len()] = [const { AtomicU64::new(0) }; PHASES.len()];
 /// Tracked frames counted since the first frame (which is left out: it fits coarse to fine).
 static FRAMES: AtomicU64 = AtomicU64::new(0);
 

@@ -592,10 +592,13 @@ pub fn measure(
         &images[0],
         candidates.iter().map(|c| (c.2 as u32, c.3 as u32)),
     );
-    let images: Vec<Grey> = images
-        .par_iter()
-        .map(|i| Grey::new(i, weights).smoothed(params.smooth_radius >> level))
-        .collect();
+    let images: Vec<Grey> =
+        crate::fit::profile::time(crate::fit::profile::Phase::StereoImages, || {
+            images
+                .par_iter()
+                .map(|i| Grey::new(i, weights).smoothed(params.smooth_radius >> level))
+                .collect()
+        });
     let work: Vec<_> = (1..views.len())
         .filter(|&m| {
             is_stereo_partner(
@@ -606,6 +609,7 @@ pub fn measure(
         })
         .flat_map(|m| candidates.iter().map(move |c| (m, c)))
         .collect();
+    let searched = crate::fit::profile::enabled().then(std::time::Instant::now);
     let matches = work
         .par_iter()
         .filter_map(|&(m, &(rx, ry, x, y, si))| {
@@ -632,6 +636,9 @@ pub fn measure(
             })
         })
         .collect();
+    if let Some(t) = searched {
+        crate::fit::profile::add(crate::fit::profile::Phase::StereoSearch, t.elapsed());
+    }
     StereoSet::new(ctx.cameras, &state.intrinsics, matches)
 }
 
