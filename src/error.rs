@@ -66,9 +66,27 @@ pub fn input_err(path: impl AsRef<Path>, problem: impl Into<String>) -> Error {
     Error::Input(InputError::new(path, problem))
 }
 
+/// Refuses what is not a regular file (after links): reading a named pipe blocks until
+/// something writes to it, and a device such as /dev/zero never ends.
+pub fn regular_file(path: &Path) -> std::io::Result<()> {
+    let meta = std::fs::metadata(path)?;
+    if meta.is_file() {
+        return Ok(());
+    }
+    Err(std::io::Error::new(
+        std::io::ErrorKind::InvalidInput,
+        if meta.is_dir() {
+            "is a folder, not a file"
+        } else {
+            "is not a regular file (a pipe or a device)"
+        },
+    ))
+}
+
 /// A text file's contents without a leading UTF-8 byte-order mark (some Windows tools write
 /// one before JSON; CONTRACT §2 accepts it).
 pub fn read_text(path: &Path) -> std::io::Result<String> {
+    regular_file(path)?;
     let text = std::fs::read_to_string(path)?;
     Ok(match text.strip_prefix('\u{feff}') {
         Some(rest) => rest.to_string(),

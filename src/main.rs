@@ -40,9 +40,9 @@ enum Command {
         /// Inclusive 0-based frame range, e.g. 0..29 (default: all frames).
         #[arg(long)]
         frames: Option<String>,
-        /// Number of trees (N_b).
-        #[arg(long, default_value_t = 20)]
-        trees: usize,
+        /// Number of trees (N_b), 1 to 1000.
+        #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u16).range(1..=1000))]
+        trees: u16,
     },
     /// Train the forest, initialise, track every frame; write masks, trajectory and metrics.
     Track {
@@ -262,7 +262,7 @@ fn run(cli: Cli) -> Result<()> {
             let scene = endofuse::open::scene(&scene)?;
             let range = frame_range(frames.as_deref(), scene.frame_count)?;
             let params = endofuse::appearance::ForestParams {
-                trees: trees.max(1),
+                trees: trees.into(),
                 ..Default::default()
             };
             let inputs: Vec<&Path> = scene.root.as_deref().into_iter().collect();
@@ -573,8 +573,30 @@ fn run(cli: Cli) -> Result<()> {
                 vary_rig,
                 ..SynthOptions::default()
             };
+            // Refused before anything is written, naming the file the size came from.
+            if let Err(e) = options.validate() {
+                return Err(match &calib {
+                    Some(file) => endofuse::InputError::new(
+                        file,
+                        format!(
+                            "gives frames of {width}×{height} px, which synth cannot make: {e}"
+                        ),
+                    ),
+                    None => endofuse::InputError::new(&out, e.to_string()),
+                }
+                .into());
+            }
             let started = std::time::Instant::now();
-            endofuse::synth::write_scene(&out, &options, &progress("synth"))?;
+            // Written whole into a fresh staging folder, then moved onto --out: an earlier
+            // phantom there is replaced, not merged with (no stale frames), and nothing is
+            // written through links inside it; a folder of anything else is refused.
+            let inputs: Vec<&Path> = meshes.iter().chain(&calib).map(|p| p.as_path()).collect();
+            endofuse::results_dir::write_whole_over(
+                &out,
+                &inputs,
+                endofuse::results_dir::Earlier::Phantom,
+                |dir| endofuse::synth::write_scene(dir, &options, &progress("synth")),
+            )?;
             eprintln!(
                 "synth: wrote {} in {:.1} s",
                 out.display(),

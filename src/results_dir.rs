@@ -1,18 +1,56 @@
-//! A results folder (`track --out`, `classify --out`) written whole or not at all.
+//! A results folder (`track --out`, `classify --out`, and `synth --out`'s phantom) written
+//! whole or not at all.
 //!
 //! Outputs are written into a hidden staging folder beside `--out` and renamed onto it only
 //! when every frame succeeded: a bad frame half-way, a full disk or a kill leaves `--out` as
 //! it was (a `.NAME.partial-PID` folder may remain; its name says what it is), never a mix of
 //! old and new frames. An existing `--out` is replaced only when it is empty or an earlier
-//! `track`/`classify` result (it holds metrics.json), and never when it holds the scene or
-//! the working folder: anything else in it is the user's, and is refused.
+//! `track`/`classify` result (it holds metrics.json; for `synth`, an earlier phantom), and never
+//! when it holds the scene or the working folder: anything else in it is the user's, and is
+//! refused.
 
 use crate::ctimport::output::{commit, refuse_destroying, staging};
 use crate::error::{Error, InputError};
 use std::path::Path;
 
+/// What an existing `--out` may hold and still be replaced whole.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Earlier {
+    /// An earlier `track` or `classify` result: it holds metrics.json.
+    Results,
+    /// A phantom `synth` wrote: it holds scene.json and gt/trajectory.json.
+    Phantom,
+}
+
+impl Earlier {
+    fn found_in(self, out: &Path) -> bool {
+        match self {
+            Earlier::Results => out.join("metrics.json").is_file(),
+            Earlier::Phantom => {
+                out.join("scene.json").is_file() && out.join("gt/trajectory.json").is_file()
+            }
+        }
+    }
+
+    fn refusal(self) -> &'static str {
+        match self {
+            Earlier::Results => {
+                "holds files that are not an earlier track or classify result (no metrics.json): choose an empty or new folder"
+            }
+            Earlier::Phantom => {
+                "holds files that are not an earlier synth phantom (no scene.json with gt/trajectory.json): choose an empty or new folder"
+            }
+        }
+    }
+}
+
 /// Refuses an `out` that replacing would destroy more than an earlier result of.
 pub fn check(out: &Path, inputs: &[&Path]) -> Result<(), Error> {
+    check_for(out, inputs, Earlier::Results)
+}
+
+/// [`check`] for a folder that may hold an `earlier` output of another kind.
+pub fn check_for(out: &Path, inputs: &[&Path], earlier: Earlier) -> Result<(), Error> {
     if out.exists() && !out.is_dir() {
         return Err(InputError::new(
             out,
@@ -25,12 +63,8 @@ pub fn check(out: &Path, inputs: &[&Path]) -> Result<(), Error> {
         refuse_destroying(out, inputs, "results would replace it; choose a new folder")?;
     }
     let empty = std::fs::read_dir(out).map_or(true, |mut d| d.next().is_none());
-    if !empty && !out.join("metrics.json").is_file() {
-        return Err(InputError::new(
-            out,
-            "holds files that are not an earlier track or classify result (no metrics.json): choose an empty or new folder",
-        )
-        .into());
+    if !empty && !earlier.found_in(out) {
+        return Err(InputError::new(out, earlier.refusal()).into());
     }
     Ok(())
 }
@@ -42,7 +76,17 @@ pub fn write_whole<T>(
     inputs: &[&Path],
     write: impl FnOnce(&Path) -> Result<T, Error>,
 ) -> Result<T, Error> {
-    check(out, inputs)?;
+    write_whole_over(out, inputs, Earlier::Results, write)
+}
+
+/// [`write_whole`] over a folder that may hold an `earlier` output of another kind.
+pub fn write_whole_over<T>(
+    out: &Path,
+    inputs: &[&Path],
+    earlier: Earlier,
+    write: impl FnOnce(&Path) -> Result<T, Error>,
+) -> Result<T, Error> {
+    check_for(out, inputs, earlier)?;
     let tmp = staging(out)?;
     match write(&tmp) {
         Ok(v) => {

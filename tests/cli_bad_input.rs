@@ -319,6 +319,34 @@ fn bad_meshes() {
     );
 }
 
+/// A named pipe where a file should be is refused at once: reading one blocks until something
+/// writes to it (`info` hung on it before).
+#[cfg(unix)]
+#[test]
+fn a_pipe_instead_of_a_file_is_refused_not_waited_on() {
+    let d = scratch("fifo-mesh");
+    let mesh = d.join("meshes/kidney.obj");
+    std::fs::remove_file(&mesh).unwrap();
+    let made = Command::new("mkfifo").arg(&mesh).status();
+    if !made.is_ok_and(|s| s.success()) {
+        eprintln!("skipped: mkfifo is not available here");
+        return;
+    }
+    expect_bad(&d, "meshes/kidney.obj", "not a regular file");
+
+    let d = scratch("fifo-scene");
+    let json = d.join("scene.json");
+    std::fs::remove_file(&json).unwrap();
+    assert!(
+        Command::new("mkfifo")
+            .arg(&json)
+            .status()
+            .unwrap()
+            .success()
+    );
+    expect_bad(&d, "scene.json", "not a regular file");
+}
+
 #[test]
 fn bad_synth_options_are_refused() {
     let out = Path::new(env!("CARGO_TARGET_TMPDIR"))
@@ -336,6 +364,63 @@ fn bad_synth_options_are_refused() {
         .output()
         .unwrap();
     assert_eq!(run.status.code(), Some(2));
+    let run = Command::new(env!("CARGO_BIN_EXE_endofuse"))
+        .args(["classify", "x", "--trees", "4294967295", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_eq!(run.status.code(), Some(2), "a forest too large to allocate");
+    assert!(String::from_utf8_lossy(&run.stderr).contains("--trees"));
+}
+
+/// `synth --out` writes a phantom whole: an earlier phantom there is replaced (none of its
+/// frames stay), a folder of anything else is refused and left as it was.
+#[test]
+fn synth_replaces_an_earlier_phantom_and_refuses_other_folders() {
+    let base = Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("endofuse-synth-out-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&base);
+    let synth = |out: &Path, frames: &str| {
+        Command::new(env!("CARGO_BIN_EXE_endofuse"))
+            .args([
+                "synth", "--width", "64", "--height", "48", "--frames", frames,
+            ])
+            .arg("--out")
+            .arg(out)
+            .output()
+            .unwrap()
+    };
+    let phantom = base.join("phantom");
+    assert!(synth(&phantom, "3").status.success());
+    assert!(phantom.join("left/000002.png").is_file());
+    let again = synth(&phantom, "2");
+    assert!(
+        again.status.success(),
+        "{}",
+        String::from_utf8_lossy(&again.stderr)
+    );
+    assert!(phantom.join("left/000001.png").is_file());
+    assert!(
+        !phantom.join("left/000002.png").exists(),
+        "a frame of the earlier phantom stayed"
+    );
+
+    let user = base.join("user");
+    std::fs::create_dir_all(&user).unwrap();
+    std::fs::write(user.join("notes.txt"), "mine").unwrap();
+    let refused = synth(&user, "2");
+    assert_eq!(refused.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert!(
+        stderr.contains("user") && stderr.contains("not an earlier synth phantom"),
+        "{stderr}"
+    );
+    assert_eq!(
+        std::fs::read_to_string(user.join("notes.txt")).unwrap(),
+        "mine"
+    );
+    assert_eq!(std::fs::read_dir(&user).unwrap().count(), 1);
+    let _ = std::fs::remove_dir_all(&base);
 }
 
 /// A doubtful input that is not an error (a baseline of 5 µm: the calibration is in metres)

@@ -73,6 +73,17 @@ const CLASS_LABELS: [&str; CLASS_KEY_COUNT as usize] = [
     "Paint class 9",
 ];
 
+/// egui's text for a shortcut, with the keys it spells out by name ("OpenBracket") written
+/// as the key's own symbol.
+pub fn shortcut_text(ctx: &egui::Context, shortcut: &KeyboardShortcut) -> String {
+    let text = ctx.format_shortcut(shortcut);
+    match shortcut.logical_key {
+        Key::OpenBracket => text.replace("OpenBracket", "["),
+        Key::CloseBracket => text.replace("CloseBracket", "]"),
+        _ => text,
+    }
+}
+
 const fn key(k: Key) -> Option<KeyboardShortcut> {
     Some(KeyboardShortcut::new(Modifiers::NONE, k))
 }
@@ -141,7 +152,7 @@ impl Action {
             Action::Place => "Place model",
             Action::BrushSmaller => "Smaller brush",
             Action::BrushBigger => "Bigger brush",
-            Action::Undo => "Undo stroke",
+            Action::Undo => "Undo",
             Action::Redo => "Redo stroke",
             Action::Train => "Train forest",
             Action::ShowImage => "Image",
@@ -216,10 +227,17 @@ impl Action {
         }
     }
 
+    /// The shortcut as a user reads it ("Ctrl+T", "[", "Esc"); empty where there is none.
+    pub fn shortcut_text(self, ctx: &egui::Context) -> String {
+        self.shortcut()
+            .map(|s| shortcut_text(ctx, &s))
+            .unwrap_or_default()
+    }
+
     /// "Label (shortcut)" for tooltips.
     pub fn hint(self, ctx: &egui::Context) -> String {
         match (self.shortcut(), self.held_key()) {
-            (Some(s), _) => format!("{} ({})", self.label(), ctx.format_shortcut(&s)),
+            (Some(s), _) => format!("{} ({})", self.label(), shortcut_text(ctx, &s)),
             (None, Some(k)) => format!("{} (hold {})", self.label(), k.name()),
             (None, None) => self.label().to_string(),
         }

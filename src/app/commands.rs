@@ -162,9 +162,7 @@ impl EndofuseApp {
                 }
             }
             AppCommand::Place(affine) => {
-                self.doc.placement = Some(affine);
-                self.doc.results.remove(&self.view.frame);
-                self.doc.touch();
+                self.doc.place(self.view.frame, affine);
                 self.screen.textures.forget_overlays();
             }
             AppCommand::DiscardAutosave => self.discard_autosave(),
@@ -195,7 +193,15 @@ impl EndofuseApp {
             Action::BrushSmaller => self.resize_brush(0.8),
             Action::BrushBigger => self.resize_brush(1.25),
             Action::Undo => {
-                self.doc.editor.undo();
+                let moves = self.doc.placement_undo.len();
+                let restored = self.doc.undo();
+                if self.doc.placement_undo.len() < moves {
+                    self.screen.textures.forget_overlays();
+                    self.status.notify(match restored {
+                        Some(t) => format!("Model move undone: frame {t}'s fit is back."),
+                        None => "Model move undone.".to_string(),
+                    });
+                }
             }
             Action::Redo => {
                 self.doc.editor.redo();

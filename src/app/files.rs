@@ -72,7 +72,7 @@ impl Files {
 
 /// True when `path` is a session file (its text names the session format).
 pub(super) fn is_session_file(path: &Path) -> bool {
-    std::fs::read_to_string(path).is_ok_and(|t| t.contains(SESSION_FORMAT))
+    crate::error::read_text(path).is_ok_and(|t| t.contains(SESSION_FORMAT))
 }
 
 /// Removes a file that may not exist; an error names it when it exists and cannot be removed.
@@ -147,6 +147,7 @@ impl EndofuseApp {
             // Saved before training: the forest trained since is not the session's.
             None => self.drop_forest(),
         }
+        self.doc.placement_undo.clear();
         self.doc.results = s
             .results
             .into_iter()

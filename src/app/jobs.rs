@@ -156,6 +156,7 @@ impl EndofuseApp {
         self.jobs.forest_epoch += 1;
         doc.placement = scene.initial_pose;
         doc.results.clear();
+        doc.placement_undo.clear();
         self.screen.textures = Default::default();
         self.screen.stroke = Default::default();
         let spec = doc.spec.clone();
@@ -420,7 +421,7 @@ impl EndofuseApp {
                     ""
                 };
                 self.status.notify(format!(
-                    "Forest trained on {} pixels in {:.2} s{preview}; checking it on strokes it did not learn…",
+                    "Forest trained on {} samples (the painted pixels and their coarser pyramid levels) in {:.2} s{preview}; checking it on strokes it did not learn…",
                     a.stats.samples, a.stats.train_s
                 ));
                 self.forest_changed(Some(a));
@@ -455,7 +456,7 @@ impl EndofuseApp {
                         ""
                     };
                     self.status.notify(format!(
-                        "Forest trained on {} pixels in {:.2} s{preview}{check}.",
+                        "Forest trained on {} samples in {:.2} s{preview}{check}.",
                         validated.stats.samples, validated.stats.train_s
                     ));
                     // The same forest: its maps stay.
@@ -549,8 +550,22 @@ impl EndofuseApp {
             }
             Event::Finished(task) => self.task_ended(task, true),
             Event::Cancelled(task) => {
+                // A cancelled track leaves a mix: the frames it reached are new, the others
+                // keep whatever fit they had. Say so rather than let the timeline look whole.
+                let reached = self
+                    .status
+                    .busy
+                    .as_ref()
+                    .filter(|b| b.task == task && task == Task::Track)
+                    .map(|b| (b.done, b.total));
                 self.task_ended(task, false);
-                self.status.notify("Cancelled.");
+                self.status.notify(match reached {
+                    Some((done, total)) if done < total => format!(
+                        "Cancelled after {done} of {total} frames: the frames it did not reach \
+                         keep the fits they had before (from an earlier run, or none)."
+                    ),
+                    _ => "Cancelled.".to_string(),
+                });
             }
             Event::Failed { task, message } => {
                 self.task_ended(task, false);
@@ -634,11 +649,18 @@ impl EndofuseApp {
             } else {
                 String::new()
             };
+            // The figures after the count cover every fitted frame, not only this job's.
+            let fitted = self.doc.results.len();
+            let lost = match lost {
+                0 => "none lost".to_string(),
+                n => format!("{n} lost"),
+            };
             self.status.notify(format!(
-                "Fitted {} frame{} in mode {} ({lost} of all fitted frames lost){}.{warning}",
+                "Fitted {} frame{} in mode {}. Over all {fitted} fitted frame{}: {lost}{}.{warning}",
                 busy.total,
                 if busy.total == 1 { "" } else { "s" },
                 self.doc.mode().name(),
+                if fitted == 1 { "" } else { "s" },
                 hidden.concat()
             ));
         }

@@ -60,6 +60,9 @@ pub struct Shown<'a> {
     pub jobs: &'a Jobs,
     pub files: &'a Files,
     pub commands: &'a CommandQueue,
+    /// The window's area below the menu bar: floating windows stay inside it, so none covers
+    /// the menus.
+    pub below_menu: egui::Rect,
 }
 
 impl EndofuseApp {
@@ -162,7 +165,7 @@ impl eframe::App for EndofuseApp {
         self.shortcuts(&ctx);
         self.dropped_files(&ctx);
         {
-            let shown = Shown {
+            let mut shown = Shown {
                 doc: &self.doc,
                 view: &self.view,
                 prefs: &self.prefs,
@@ -170,8 +173,10 @@ impl eframe::App for EndofuseApp {
                 jobs: &self.jobs,
                 files: &self.files,
                 commands: &self.commands,
+                below_menu: ctx.content_rect(),
             };
             panels::menu::menu_bar(&shown, ui);
+            shown.below_menu = ui.available_rect_before_wrap();
             panels::menu::status_bar(&shown, ui);
             panels::timeline::timeline(&shown, &mut self.screen.layout, ui);
             panels::side::side_panel(&shown, ui);

@@ -117,6 +117,8 @@ pub struct Document {
     /// The pose the model was placed at (the scene's, automatic, or by hand).
     pub placement: Option<Affine>,
     pub results: BTreeMap<usize, FrameResult>,
+    /// What moving the model by hand replaced, newest last (Undo restores it).
+    pub placement_undo: Vec<PlacementUndo>,
     /// Counts changes to what a session keeps besides the strokes: fits, the placement, the
     /// settings, the forest.
     pub edits: u64,
@@ -125,7 +127,77 @@ pub struct Document {
     pub autosaved: (u64, u64),
 }
 
+/// The model moved by hand on `frame`: the placement before, and the frame's fit the move
+/// discarded. Consecutive moves with nothing else between them are one entry.
+#[derive(Clone)]
+pub struct PlacementUndo {
+    pub frame: usize,
+    pub placement: Option<Affine>,
+    pub result: Option<FrameResult>,
+    /// The stroke editor's undo depth when the move began: Undo takes back whichever of the
+    /// two came last.
+    pub stroke_steps: usize,
+    /// [`Document::edits`] after the latest move of this entry.
+    pub edits_after: u64,
+}
+
+/// How many hand moves of the model Undo can take back.
+const PLACEMENT_UNDO_DEPTH: usize = 32;
+
 impl Document {
+    /// Moves the model by hand to `affine` on `frame`, discarding that frame's fit, both kept
+    /// for [`Document::undo`].
+    pub fn place(&mut self, frame: usize, affine: Affine) {
+        let continuing = self
+            .placement_undo
+            .last()
+            .is_some_and(|u| u.frame == frame && u.edits_after == self.edits);
+        if !continuing {
+            self.placement_undo.push(PlacementUndo {
+                frame,
+                placement: self.placement,
+                result: self.results.get(&frame).cloned(),
+                stroke_steps: self.editor.undo_steps(),
+                edits_after: 0,
+            });
+            if self.placement_undo.len() > PLACEMENT_UNDO_DEPTH {
+                self.placement_undo.remove(0);
+            }
+        }
+        self.placement = Some(affine);
+        self.results.remove(&frame);
+        self.touch();
+        if let Some(u) = self.placement_undo.last_mut() {
+            u.edits_after = self.edits;
+        }
+    }
+
+    /// Is there a stroke or a hand move of the model to take back?
+    pub fn can_undo(&self) -> bool {
+        self.editor.can_undo() || !self.placement_undo.is_empty()
+    }
+
+    /// Takes back the newer of the last stroke and the last hand move of the model. Returns
+    /// the frame whose fit a move's undo restored, if any.
+    pub fn undo(&mut self) -> Option<usize> {
+        let move_is_newer = self
+            .placement_undo
+            .last()
+            .is_some_and(|u| u.stroke_steps == self.editor.undo_steps());
+        if !move_is_newer {
+            self.editor.undo();
+            return None;
+        }
+        let u = self.placement_undo.pop()?;
+        self.placement = u.placement;
+        let restored = u.result.map(|r| {
+            self.results.insert(u.frame, r);
+            u.frame
+        });
+        self.touch();
+        restored
+    }
+
     /// True when anything a session keeps changed since the last save.
     pub fn unsaved(&self) -> bool {
         self.scene.is_some() && self.revision() != self.saved
@@ -301,5 +373,104 @@ impl Status {
             done: 0,
             total,
         });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::Seeds;
+    use crate::strokes::Dab;
+
+    fn result(frame: usize, energy: f64) -> FrameResult {
+        FrameResult {
+            frame,
+            state: FitState {
+                affine: Affine::IDENTITY,
+                shape: vec![],
+                intrinsics: vec![],
+            },
+            energy,
+            confidence: 0.9,
+            lost: false,
+            ms: 1.0,
+            dice: vec![],
+            hidden_error_mm: vec![],
+            depth_explains_zoom: false,
+            refused: vec![],
+            hidden_region: Default::default(),
+        }
+    }
+
+    fn moved(x_mm: f64) -> Affine {
+        let mut a = Affine::IDENTITY;
+        a.q[9] = x_mm;
+        a
+    }
+
+    /// A stroke of `value` (each call a different one, so that every stroke changes pixels).
+    fn stroke(doc: &mut Document, value: u8) {
+        doc.editor.begin_stroke();
+        let paint = Dab::Paint {
+            value,
+            overwrite: true,
+        };
+        doc.editor.line(0, 0, (2.0, 2.0), (8.0, 8.0), 2.0, paint);
+        doc.editor.end_stroke();
+    }
+
+    /// A hand move of the model discards the frame's fit; Undo brings the fit and the
+    /// placement before back, and takes strokes and moves back newest first.
+    #[test]
+    fn undo_takes_back_a_model_move_and_restores_the_fit() {
+        let mut doc = Document {
+            editor: SeedEditor::new(&Seeds::default(), vec![(16, 16)]),
+            placement: Some(moved(0.0)),
+            ..Document::default()
+        };
+        doc.results.insert(3, result(3, 7.0));
+        stroke(&mut doc, 1);
+        // One drag is many moves: they undo as one.
+        for x in 1..=5 {
+            doc.place(3, moved(x as f64));
+        }
+        assert!(!doc.results.contains_key(&3));
+        assert_eq!(doc.placement, Some(moved(5.0)));
+        stroke(&mut doc, 2);
+        assert_eq!(doc.editor.undo_steps(), 2);
+
+        // The stroke after the move goes first ...
+        assert_eq!(doc.undo(), None);
+        assert_eq!(doc.editor.undo_steps(), 1);
+        assert_eq!(doc.placement, Some(moved(5.0)));
+        // ... then the move, with the fit it discarded ...
+        assert_eq!(doc.undo(), Some(3));
+        assert_eq!(doc.placement, Some(moved(0.0)));
+        assert_eq!(doc.results.get(&3), Some(&result(3, 7.0)));
+        assert!(doc.placement_undo.is_empty());
+        // ... then the stroke before it.
+        assert!(doc.can_undo());
+        assert_eq!(doc.undo(), None);
+        assert_eq!(doc.editor.undo_steps(), 0);
+        assert!(!doc.can_undo());
+    }
+
+    /// Moves separated by something else (here a fit arriving) are separate undo steps.
+    #[test]
+    fn moves_with_an_edit_between_are_separate_undo_steps() {
+        let mut doc = Document {
+            editor: SeedEditor::new(&Seeds::default(), vec![(16, 16)]),
+            ..Document::default()
+        };
+        doc.place(0, moved(1.0));
+        doc.results.insert(0, result(0, 2.0));
+        doc.touch();
+        doc.place(0, moved(2.0));
+        assert_eq!(doc.placement_undo.len(), 2);
+        assert_eq!(doc.undo(), Some(0));
+        assert_eq!(doc.placement, Some(moved(1.0)));
+        assert_eq!(doc.undo(), None);
+        assert_eq!(doc.placement, None);
+        assert!(doc.results.get(&0).is_some_and(|r| r.energy == 2.0));
     }
 }

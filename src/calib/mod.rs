@@ -219,6 +219,7 @@ const MAX_BYTES: u64 = 16 << 20;
 /// Errors name the file and say the problem in one line.
 pub fn read(path: &Path) -> Result<Calibration, InputError> {
     let fail = |problem: String| InputError::new(path, problem);
+    crate::error::regular_file(path).map_err(|e| fail(format!("cannot read: {e}")))?;
     let file = std::fs::File::open(path).map_err(|e| fail(format!("cannot read: {e}")))?;
     let mut bytes = Vec::new();
     file.take(MAX_BYTES + 1)

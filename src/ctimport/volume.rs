@@ -105,6 +105,7 @@ impl LabelVolume {
 /// Reads a label volume. Gzip is recognised by its magic bytes, not only by the name.
 pub fn read(path: &Path) -> Result<LabelVolume, VolumeError> {
     use std::io::BufRead;
+    crate::error::regular_file(path).map_err(|e| VolumeError::Read(e.to_string()))?;
     let file = std::fs::File::open(path).map_err(|e| VolumeError::Read(e.to_string()))?;
     let mut source = std::io::BufReader::new(file);
     let gz = source

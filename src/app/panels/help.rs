@@ -19,7 +19,13 @@ pub const FIRST_STEPS: [&str; 6] = [
 
 pub fn help_window(shown: &Shown, ctx: &egui::Context) {
     let mut open = shown.view.show_help;
+    let class_names: &[String] = shown
+        .doc
+        .classes
+        .as_ref()
+        .map_or(&[], |c| c.names.as_slice());
     egui::Window::new("Help")
+        .constrain_to(shown.below_menu)
         .open(&mut open)
         .default_size([520.0, 560.0])
         .show(ctx, |ui| {
@@ -35,9 +41,20 @@ pub fn help_window(shown: &Shown, ctx: &egui::Context) {
                     .striped(true)
                     .show(ui, |ui| {
                         for a in Action::ALL {
-                            ui.label(a.label());
+                            let label = match a {
+                                // The scene's own names, and only the classes it has.
+                                Action::PickClass(k) if !class_names.is_empty() => {
+                                    match class_names.get(k as usize) {
+                                        Some(name) if k > 0 => format!("Paint {name}"),
+                                        Some(_) => a.label().to_string(),
+                                        None => continue,
+                                    }
+                                }
+                                _ => a.label().to_string(),
+                            };
+                            ui.label(label);
                             let keys = match (a.shortcut(), a.held_key()) {
-                                (Some(s), _) => ctx.format_shortcut(&s),
+                                (Some(_), _) => a.shortcut_text(ctx),
                                 (None, Some(k)) => format!("hold {}", k.name()),
                                 (None, None) => String::new(),
                             };

@@ -116,15 +116,23 @@ pub fn status_bar(shown: &Shown, ui: &mut egui::Ui) {
             } else {
                 ui.label(RichText::new(next_step(shown.doc)).weak());
             }
+            // Long messages end in "…" where the window ends, whole on hover; the dismiss
+            // button comes first so that it never falls off the edge.
             if let Some(e) = &shown.status.error {
                 ui.separator();
-                ui.colored_label(Color32::from_rgb(255, 110, 110), format!("Error: {e}"));
                 if ui.small_button("x").on_hover_text("Dismiss").clicked() {
                     shown.commands.send(AppCommand::DismissError);
                 }
+                ui.add(
+                    egui::Label::new(
+                        RichText::new(format!("Error: {e}"))
+                            .color(Color32::from_rgb(255, 110, 110)),
+                    )
+                    .truncate(),
+                );
             } else if let Some(n) = &shown.status.notice {
                 ui.separator();
-                ui.label(n);
+                ui.add(egui::Label::new(n).truncate());
             }
         });
     });

@@ -35,7 +35,7 @@ pub(super) fn menu_item(shown: &Shown, ui: &mut egui::Ui, a: Action) {
 pub(super) fn menu_item_if(shown: &Shown, ui: &mut egui::Ui, a: Action, ready: Result<(), &str>) {
     let mut button = egui::Button::new(a.label());
     if let Some(s) = a.shortcut() {
-        button = button.shortcut_text(ui.ctx().format_shortcut(&s));
+        button = button.shortcut_text(crate::app::actions::shortcut_text(ui.ctx(), &s));
     }
     let r = ui.add_enabled(ready.is_ok(), button);
     let r = match ready {

@@ -338,6 +338,7 @@ pub fn window(shown: &Shown, form: &mut Option<NewSceneForm>, ctx: &egui::Contex
     f.refresh(ctx);
     let mut open = true;
     egui::Window::new("New scene")
+        .constrain_to(shown.below_menu)
         .open(&mut open)
         .collapsible(false)
         .default_width(620.0)

@@ -78,6 +78,9 @@ fn plot(
         .height(height)
         .y_axis_label(axis.label)
         .y_axis_min_width(38.0)
+        // The wheel scrolls the window to the plots below, not this plot's axes (panning a
+        // plot off its curve left it empty); Ctrl+wheel still zooms.
+        .allow_scroll(false)
         // About three labelled ticks whatever the range (the default spacing labels only
         // powers of ten: a Dice axis from 0.9 to 1 read "1").
         .y_grid_spacer(egui_plot::uniform_grid_spacer(|input| {
@@ -269,6 +272,7 @@ pub fn review_window(shown: &Shown, ctx: &egui::Context) {
     let mut open = shown.view.show_review;
     let doc = shown.doc;
     egui::Window::new("Review")
+        .constrain_to(shown.below_menu)
         .open(&mut open)
         .default_size([540.0, 600.0])
         .show(ctx, |ui| {

@@ -69,7 +69,10 @@ fn side_contents(shown: &Shown, ui: &mut egui::Ui) {
                 if ui
                     .selectable_label(view.class == k && view.tool == Tool::Brush, text)
                     .on_hover_text(match pick.shortcut() {
-                        Some(s) => format!("Paint {label} ({})", ctx.format_shortcut(&s)),
+                        Some(s) => format!(
+                            "Paint {label} ({})",
+                            crate::app::actions::shortcut_text(&ctx, &s)
+                        ),
                         None => format!("Paint {label}"),
                     })
                     .clicked()
@@ -104,7 +107,7 @@ fn side_contents(shown: &Shown, ui: &mut egui::Ui) {
         ui.add(egui::Slider::new(&mut prefs.seed_opacity, 0.0..=1.0).text("opacity"));
     });
     ui.horizontal(|ui| {
-        action_button(shown, ui, Action::Undo, doc.editor.can_undo());
+        action_button(shown, ui, Action::Undo, doc.can_undo());
         action_button(shown, ui, Action::Redo, doc.editor.can_redo());
     });
     let counts = doc.editor.counts();
@@ -149,15 +152,20 @@ fn side_contents(shown: &Shown, ui: &mut egui::Ui) {
             _ => ui.visuals().text_color(),
         };
         ui.horizontal(|ui| {
-            ui.label(format!("{} px, {:.2} s", a.stats.samples, a.stats.train_s))
-                .on_hover_text(format!(
-                    "Trained on {} painted pixels in {:.2} s. Out-of-bag error {:.2} %: how well \
+            ui.label(format!(
+                "{} samples, {:.2} s",
+                a.stats.samples, a.stats.train_s
+            ))
+            .on_hover_text(format!(
+                "Trained on {} samples in {:.2} s: the painted pixels, and the same strokes \
+                     at the coarser pyramid levels the fit also reads (so more than the painted \
+                     pixels counted above). Out-of-bag error {:.2} %: how well \
                      the forest separates the painted pixels, not how good the maps are \
                      elsewhere.",
-                    a.stats.samples,
-                    a.stats.train_s,
-                    a.stats.oob_error * 100.0
-                ));
+                a.stats.samples,
+                a.stats.train_s,
+                a.stats.oob_error * 100.0
+            ));
             ui.colored_label(colour, check)
                 .on_hover_text(match &a.validation {
                     Some(v) => format!(

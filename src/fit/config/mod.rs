@@ -579,6 +579,7 @@ mod tests {
             r#"{"solver": {"lm_floor": -1}}"#,
             r#"{"tracking": {"max_fit_level": 30}}"#,
             r#"{"stereo": {"half_window": 0}}"#,
+            r#"{"stereo": {"smooth_radius": 4294967295}}"#,
             r#"{"hidden_region": {"confidence_full": 1.5}}"#,
             r#"{"hidden_region": {"model_error_per_confidence_shortfall": -1}}"#,
         ] {

@@ -122,6 +122,9 @@ impl FitConfig {
         non_negative("stereo.weight", st.weight)?;
         within("stereo.max_points", st.max_points, 1..=100_000)?;
         within("stereo.half_window", st.half_window, 1..=32)?;
+        // A binomial kernel of 2·radius + 1 taps over each whole view: beyond 16 px it only
+        // blurs the texture away, and a huge one ran for minutes.
+        within("stereo.smooth_radius", st.smooth_radius, 0..=16)?;
         within("stereo.search_px", st.search_px, 1..=64)?;
         within("stereo.min_ncc", st.min_ncc, -1.0..=1.0)?;
         positive("stereo.sigma_px", st.sigma_px)?;

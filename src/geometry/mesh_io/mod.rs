@@ -84,6 +84,7 @@ pub fn load_mesh(path: &Path) -> Result<Mesh, InputError> {
 
 /// [`load_mesh`] with the typed error, which does not name the file.
 pub fn read_mesh(path: &Path) -> Result<Mesh, MeshFileError> {
+    crate::error::regular_file(path).map_err(MeshFileError::Read)?;
     let bytes = std::fs::read(path).map_err(MeshFileError::Read)?;
     let ext = path
         .extension()
