@@ -128,6 +128,20 @@ fn bad_values_in_scene_json() {
             "not a rotation",
         ),
         (
+            "far-camera",
+            Box::new(|v| v["cameras"][1]["translation"] = serde_json::json!([1e300, 0, 0])),
+            "under 100 m",
+        ),
+        (
+            "huge-pose",
+            Box::new(|v| {
+                v["initial_pose"] = serde_json::json!({
+                    "affine": [1e300, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 150]
+                })
+            }),
+            "more than 100×",
+        ),
+        (
             "focal",
             Box::new(|v| v["cameras"][1]["fy"] = (-3.0).into()),
             "focal lengths must be positive",

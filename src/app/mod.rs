@@ -206,6 +206,9 @@ pub fn run_native(scene: &str) -> anyhow::Result<()> {
         viewport: egui::ViewportBuilder::default()
             .with_title("endofuse")
             .with_inner_size([1400.0, 820.0])
+            // Below this the side panel and two views no longer fit: views shrank to
+            // thumbnails and the track controls were cut off.
+            .with_min_inner_size([900.0, 560.0])
             .with_drag_and_drop(true),
         ..Default::default()
     };

@@ -53,6 +53,10 @@ pub enum VolumeError {
         "the voxel-to-world transform is degenerate (determinant {0:e}); check sform/qform/pixdim"
     )]
     Transform(f64),
+    #[error(
+        "a voxel step along {axis} of {mm:e} mm: a CT's lie between 0.001 and 100 mm; check the header's units, pixdim and sform/qform"
+    )]
+    VoxelSize { axis: &'static str, mm: f64 },
     #[error("the volume is empty (a dimension of size 0)")]
     Empty,
     #[error(
@@ -159,7 +163,7 @@ fn decode(source: impl std::io::Read, gz: bool) -> Result<LabelVolume, VolumeErr
 fn decode_plain(mut source: impl std::io::Read) -> Result<LabelVolume, VolumeError> {
     use std::io::Read;
     let read_err = |e: &dyn std::fmt::Display| VolumeError::Read(e.to_string());
-    let header = nifti::NiftiHeader::from_reader(&mut source).map_err(|e| read_err(&e))?;
+    let header = nifti::NiftiHeader::from_reader(&mut source).map_err(header_error)?;
     if header.magic == *b"ni1\0" {
         return Err(VolumeError::HeaderOnly);
     }
@@ -177,6 +181,21 @@ fn decode_plain(mut source: impl std::io::Read) -> Result<LabelVolume, VolumeErr
         .read_to_end(&mut raw)
         .map_err(|e| read_err(&e))?;
     from_header_and_voxels(&header, &raw)
+}
+
+/// The header's read error in words (the crate's own text for an I/O error is Rust's debug
+/// form: "Io(Custom { kind: UnexpectedEof, … })").
+fn header_error(e: nifti::NiftiError) -> VolumeError {
+    VolumeError::Read(match e {
+        nifti::NiftiError::Io(io) if io.kind() == std::io::ErrorKind::UnexpectedEof => {
+            "the data end inside the 348-byte header: truncated, or not a NIfTI file".into()
+        }
+        nifti::NiftiError::Io(io) => io.to_string(),
+        nifti::NiftiError::InvalidFormat => {
+            "no NIfTI-1 header (its magic is neither \"n+1\" nor \"ni1\")".into()
+        }
+        other => other.to_string(),
+    })
 }
 
 const HEADER_BYTES: u64 = 348;
@@ -217,6 +236,15 @@ fn from_header_and_voxels(
     let det = linear.determinant();
     if !det.is_finite() || det.abs() < 1e-9 {
         return Err(VolumeError::Transform(det));
+    }
+    // A CT's voxels measure from a few hundredths of a millimetre to a few millimetres: a step
+    // outside 0.001–100 mm is a header in the wrong units or a broken one, whose meshes would
+    // come out kilometres wide (or microscopic) without a word.
+    for (axis, step) in ["i", "j", "k"].into_iter().zip(linear.to_cols_array_2d()) {
+        let mm = DVec3::from_array(step).length();
+        if !(1e-3..=100.0).contains(&mm) {
+            return Err(VolumeError::VoxelSize { axis, mm });
+        }
     }
     Ok(LabelVolume {
         dims,
@@ -335,7 +363,16 @@ fn world_map(h: &nifti::NiftiHeader) -> (DMat3, DVec3, WorldTransform) {
     let spacing = DMat3::from_diagonal(DVec3::new(pix(1), pix(2), pix(3)));
     if h.qform_code > 0 {
         let (b, c, d) = (h.quatern_b as f64, h.quatern_c as f64, h.quatern_d as f64);
-        let a = (1.0 - (b * b + c * c + d * d)).max(0.0).sqrt();
+        // As nifti1_io.c's nifti_quatern_to_mat44: where b² + c² + d² reaches 1 (a header
+        // that rounds, or a bad one), (b, c, d) is normalised and a = 0, a 180° turn; left as
+        // it was, the matrix would not be a rotation and would scale the volume.
+        let norm2 = b * b + c * c + d * d;
+        let (a, b, c, d) = if 1.0 - norm2 < 1e-7 && norm2 > 0.0 {
+            let n = norm2.sqrt();
+            (0.0, b / n, c / n, d / n)
+        } else {
+            ((1.0 - norm2).max(0.0).sqrt(), b, c, d)
+        };
         // NIfTI-1 qform rotation (nifti1.h, "METHOD 2").
         let r = DMat3::from_cols(
             DVec3::new(
@@ -590,6 +627,42 @@ mod tests {
         let back = read(&p).unwrap();
         assert_eq!(back.transform, WorldTransform::Pixdim);
         assert!((back.voxel_volume_mm3() - 0.5 * 0.6 * 0.7).abs() < 1e-6);
+
+        // A qform whose (b, c, d) is not inside the unit ball is normalised as nifti1_io.c
+        // does (a 180° turn): the voxels keep their size instead of growing with |(b, c, d)|.
+        let p = dir.join("q-bad.nii");
+        write(
+            &p,
+            &vol,
+            WriteTransform::Qform {
+                quaternion_bcd: [2.0, 2.0, 2.0],
+                qfac: 1.0,
+                spacing_mm: [2.0, 2.0, 2.0],
+                offset_mm: [0.0; 3],
+            },
+            WriteType::Uint8,
+            false,
+        )
+        .unwrap();
+        let back = read(&p).unwrap();
+        assert!((back.voxel_volume_mm3() - 8.0).abs() < 1e-6);
+        for col in back.linear.to_cols_array_2d() {
+            assert!((DVec3::from_array(col).length() - 2.0).abs() < 1e-6);
+        }
+        // Voxels a kilometre wide are a broken header, said as such.
+        let p = dir.join("huge.nii");
+        write(
+            &p,
+            &vol,
+            WriteTransform::Pixdim {
+                spacing_mm: [1e6, 1.0, 1.0],
+            },
+            WriteType::Uint8,
+            false,
+        )
+        .unwrap();
+        let err = read(&p).unwrap_err().to_string();
+        assert!(err.contains("voxel step along i"), "{err}");
         let _ = std::fs::remove_dir_all(&dir);
     }
 

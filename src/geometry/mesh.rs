@@ -13,8 +13,16 @@ pub enum MeshError {
     NoVertices,
     #[error("mesh has no faces")]
     NoFaces,
-    #[error("vertex {} has a non-finite coordinate ({position_mm:?})", .vertex + 1)]
+    #[error(
+        "vertex {} has a non-finite coordinate ({}, {}, {})",
+        .vertex + 1, .position_mm.x, .position_mm.y, .position_mm.z
+    )]
     NonFiniteVertex { vertex: usize, position_mm: DVec3 },
+    #[error(
+        "vertex {} lies {distance_mm:.3e} mm from the origin: a mesh is in millimetres, within 1 km",
+        .vertex + 1
+    )]
+    FarVertex { vertex: usize, distance_mm: f64 },
     #[error(
         "face {} refers to vertex {} but the mesh has {vertex_count} vertices",
         .face + 1,
@@ -57,6 +65,14 @@ impl Mesh {
             return Err(MeshError::NonFiniteVertex {
                 vertex: i,
                 position_mm: self.vertices[i],
+            });
+        }
+        // Squared extents of 1e300 overflow to infinity, and every face then looked like
+        // zero area: a vertex that far is said as what it is.
+        if let Some(i) = self.vertices.iter().position(|v| v.length() > 1e6) {
+            return Err(MeshError::FarVertex {
+                vertex: i,
+                distance_mm: self.vertices[i].length(),
             });
         }
         let n = self.vertices.len() as u32;

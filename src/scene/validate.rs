@@ -43,7 +43,7 @@ pub enum CameraProblem {
     Intrinsics(IntrinsicsError),
     #[error("'rotation' is not a rotation matrix (rows must be orthonormal with determinant +1)")]
     NotRotation,
-    #[error("'translation' must be finite")]
+    #[error("'translation' must be finite and under 100 m (100000 mm) long")]
     NonFiniteTranslation,
     #[error("frames: {0}")]
     Frames(#[source] TemplateError),
@@ -75,6 +75,13 @@ pub enum AffineError {
         "'affine' linear part has determinant {determinant:.3e}: it must preserve orientation and not collapse the model"
     )]
     Degenerate { determinant: f64 },
+    #[error(
+        "'affine' scales the model by more than 100× or moves it {translation_mm:.3e} mm (determinant {determinant:.3e}): a pose is within 100× scale and 100 m"
+    )]
+    OutOfRange {
+        determinant: f64,
+        translation_mm: f64,
+    },
 }
 
 /// Cameras and structures name output folders, so their names must be safe as folder names.
@@ -145,7 +152,9 @@ pub(super) fn validate_camera(
         return Err(bad(CameraProblem::NotRotation));
     }
     let t = DVec3::from_array(c.translation);
-    if !t.is_finite() {
+    // Millimetres: a rig wider than 100 m is a unit or export error (a baseline of 1e300
+    // printed as "inf mm").
+    if !t.is_finite() || t.length() > 1e5 {
         return Err(bad(CameraProblem::NonFiniteTranslation));
     }
     let frames = match &c.frames {
@@ -222,6 +231,18 @@ pub fn validate_affine(q: &[f64]) -> Result<Affine, AffineError> {
     let determinant = a.linear().determinant();
     if determinant <= 1e-9 {
         return Err(AffineError::Degenerate { determinant });
+    }
+    // A model scaled beyond 100× (10⁶ in volume) or placed beyond 100 m is not a pose the fit
+    // can start from: its errors came out infinite and metrics.json null.
+    let (linear_max, translation) = (
+        a.q[..9].iter().fold(0.0f64, |m, v| m.max(v.abs())),
+        DVec3::new(a.q[9], a.q[10], a.q[11]).length(),
+    );
+    if determinant > 1e6 || linear_max > 100.0 || translation > 1e5 {
+        return Err(AffineError::OutOfRange {
+            determinant,
+            translation_mm: translation,
+        });
     }
     Ok(a)
 }

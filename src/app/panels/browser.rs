@@ -89,18 +89,28 @@ impl Browser {
         match &self.picker {
             Picker::Folder { .. } if name.is_empty() => Ok(self.folder.clone()),
             _ if name.is_empty() => Err("type or pick a file name".into()),
-            _ if name.contains('/') || name == "." || name == ".." => {
-                Err("a name without '/': open the folder first".into())
-            }
+            _ if name == "." || name == ".." => Err("a name, not . or ..".into()),
+            // A name, or a path pasted whole (absolute, or under this folder).
             Picker::OpenFile { .. } => {
                 let p = self.folder.join(name);
                 if p.is_file() {
                     Ok(p)
+                } else if name.contains('/') {
+                    Err(format!("no file {}", p.display()))
                 } else {
                     Err(format!("no file {name} in this folder"))
                 }
             }
-            Picker::SaveFile { .. } | Picker::Folder { .. } => Ok(self.folder.join(name)),
+            Picker::SaveFile { .. } => {
+                let p = self.folder.join(name);
+                match p.parent() {
+                    Some(parent) if !parent.is_dir() => {
+                        Err(format!("no folder {} to save into", parent.display()))
+                    }
+                    _ => Ok(p),
+                }
+            }
+            Picker::Folder { .. } => Ok(self.folder.join(name)),
         }
     }
 
@@ -195,7 +205,11 @@ impl Browser {
                 if typed.is_dir() {
                     self.enter(typed);
                 } else {
-                    self.error = Some(format!("{} is not a folder", typed.display()));
+                    self.error = Some(format!(
+                        "{} is not a folder (the list still shows {})",
+                        typed.display(),
+                        self.folder.display()
+                    ));
                 }
             }
         });
@@ -393,6 +407,13 @@ mod tests {
         assert!(b.confirm().is_none());
         b.name = "scene.json".into();
         assert_eq!(b.confirm(), Some(d.join("scene.json")));
+        // A path pasted whole opens the file it names, wherever the list is.
+        let mut b = Browser::new(FileRequest::OpenScene, &d.join("sub"));
+        b.name = d.join("scene.json").display().to_string();
+        assert_eq!(b.confirm(), Some(d.join("scene.json")));
+        b.name = d.join("nowhere/scene.json").display().to_string();
+        assert!(b.confirm().is_none());
+        assert!(b.error.as_deref().is_some_and(|e| e.contains("nowhere")));
         let _ = std::fs::remove_dir_all(&d);
     }
 
