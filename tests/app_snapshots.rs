@@ -6,9 +6,11 @@
 
 use egui::{Event, Key, Modifiers, PointerButton, Pos2, pos2, vec2};
 use egui_kittest::Harness;
+use egui_kittest::kittest::Queryable;
 use endofuse::app::actions::Action;
 use endofuse::app::{EndofuseApp, Layer, NoDialogs, Tool};
 use std::path::Path;
+use std::sync::Arc;
 mod common;
 
 use common::app::step_until;
@@ -366,4 +368,21 @@ fn tracking_after_a_live_preview_retrains_the_full_forest_first() {
         forest.stats.samples, preview.stats.samples,
         "the same strokes"
     );
+    // Fits of the forest in use are not flagged; after a retrain they are, in the side panel.
+    h.run();
+    assert!(
+        h.query_by_label_contains("fitted with an earlier forest")
+            .is_none(),
+        "fits of the forest in use flagged as old"
+    );
+    h.state_mut().train();
+    step_until(&mut h, "the retrained forest", |a| {
+        a.status.busy.is_none()
+            && a.doc
+                .appearance
+                .as_ref()
+                .is_some_and(|f| !Arc::ptr_eq(f, &forest))
+    });
+    h.run();
+    h.get_by_label_contains("2 of 2 fitted frames were fitted with an earlier forest");
 }

@@ -156,6 +156,9 @@ impl EndofuseApp {
             })
             .map(|r| (r.frame, r))
             .collect();
+        // The session's fits came with the session's forest, just put in use.
+        let fitted: Vec<usize> = self.doc.results.keys().copied().collect();
+        self.jobs.fitted_with_current_forest(fitted.into_iter());
         self.screen.textures = Default::default();
         self.screen.stroke = Default::default();
         self.doc.touch();

@@ -43,6 +43,11 @@ pub struct Jobs {
     /// Train was sent: a Trained overtaken by a later forest is dropped, as the worker's was.
     forest_epoch: u64,
     train_epoch: u64,
+    /// Counts every forest put in use (trained, loaded, dropped; a held-out figure arriving
+    /// for the same forest does not count), and the count each frame's fit was made under:
+    /// fits of an earlier forest are said to be so, not shown as current.
+    forest_generation: u64,
+    fit_generation: HashMap<usize, u64>,
     /// The forest in use awaits its held-out figure (Command::Validate sent).
     pub validating: bool,
     /// Strokes changed at this time (s) and a live retrain is due.
@@ -57,6 +62,20 @@ pub struct Jobs {
 const PROBABILITY_CACHE_BYTES: usize = 256 << 20;
 
 impl Jobs {
+    /// How many of `fitted` frames were fitted with an earlier forest than the one in use.
+    pub fn fits_of_earlier_forests(&self, fitted: impl Iterator<Item = usize>) -> usize {
+        fitted
+            .filter(|t| self.fit_generation.get(t) != Some(&self.forest_generation))
+            .count()
+    }
+
+    /// Counts `frames`' fits as made with the forest in use (they arrived with it).
+    pub(super) fn fitted_with_current_forest(&mut self, frames: impl Iterator<Item = usize>) {
+        for t in frames {
+            self.fit_generation.insert(t, self.forest_generation);
+        }
+    }
+
     /// Keeps `frame`'s maps; over [`PROBABILITY_CACHE_BYTES`] the frames farthest from it go
     /// first (it stays, however large).
     fn keep_maps(&mut self, frame: usize, maps: Arc<Vec<ProbabilityMaps>>) {
@@ -203,6 +222,7 @@ impl EndofuseApp {
             .flatten();
         self.doc.appearance = forest;
         self.doc.touch();
+        self.jobs.forest_generation += 1;
         self.jobs.forget_maps();
         if let Some(maps) = keep {
             self.jobs.probabilities.insert(frame, maps);
@@ -525,6 +545,8 @@ impl EndofuseApp {
                     self.view.frame = f.frame;
                 }
                 self.doc.results.insert(f.frame, r);
+                self.jobs
+                    .fitted_with_current_forest(std::iter::once(f.frame));
                 self.doc.touch();
             }
             Event::Dice { frame, dice } => {

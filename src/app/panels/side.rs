@@ -262,6 +262,19 @@ fn side_contents(shown: &Shown, ui: &mut egui::Ui) {
         action_button(shown, ui, Action::Track, idle && trained);
         action_button(shown, ui, Action::Review, true);
     });
+    let older = shown
+        .jobs
+        .fits_of_earlier_forests(doc.results.keys().copied());
+    if older > 0 {
+        ui.colored_label(
+            Color32::from_rgb(255, 190, 70),
+            format!(
+                "{older} of {} fitted frames were fitted with an earlier forest: track them \
+                 again to use this one.",
+                doc.results.len()
+            ),
+        );
+    }
     hidden_structures(shown, ui, &mut prefs);
     ui.separator();
     // How the overlay is drawn comes after the workflow (seeds, forest, fit): the main path
