@@ -575,21 +575,26 @@ fn run(cli: Cli) -> Result<()> {
             };
             // Refused before anything is written, naming the file the size came from.
             if let Err(e) = options.validate() {
-                return Err(match &calib {
-                    Some(file) => endofuse::InputError::new(
+                use endofuse::synth::SynthOptionsError;
+                return Err(match (&calib, &e) {
+                    (Some(file), SynthOptionsError::Size { .. }) => endofuse::InputError::new(
                         file,
                         format!(
                             "gives frames of {width}×{height} px, which synth cannot make: {e}"
                         ),
                     ),
-                    None => endofuse::InputError::new(&out, e.to_string()),
+                    (Some(file), SynthOptionsError::Views { .. }) => endofuse::InputError::new(
+                        file,
+                        format!("has {views} cameras, which synth cannot make: {e}"),
+                    ),
+                    _ => endofuse::InputError::new(&out, e.to_string()),
                 }
                 .into());
             }
             let started = std::time::Instant::now();
-            // Written whole into a fresh staging folder, then moved onto --out: an earlier
-            // phantom there is replaced, not merged with (no stale frames), and nothing is
-            // written through links inside it; a folder of anything else is refused.
+            // Into an empty or new folder directly; over an earlier phantom, written whole into
+            // a fresh staging folder and moved onto --out (replaced, not merged with: no stale
+            // frames, nothing written through links inside it); any other folder is refused.
             let inputs: Vec<&Path> = meshes.iter().chain(&calib).map(|p| p.as_path()).collect();
             endofuse::results_dir::write_whole_over(
                 &out,

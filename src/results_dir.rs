@@ -26,9 +26,7 @@ impl Earlier {
     fn found_in(self, out: &Path) -> bool {
         match self {
             Earlier::Results => out.join("metrics.json").is_file(),
-            Earlier::Phantom => {
-                out.join("scene.json").is_file() && out.join("gt/trajectory.json").is_file()
-            }
+            Earlier::Phantom => is_phantom(out),
         }
     }
 
@@ -38,10 +36,42 @@ impl Earlier {
                 "holds files that are not an earlier track or classify result (no metrics.json): choose an empty or new folder"
             }
             Earlier::Phantom => {
-                "holds files that are not an earlier synth phantom (no scene.json with gt/trajectory.json): choose an empty or new folder"
+                "holds files that are not an earlier synth phantom (scene.json, gt/trajectory.json, meshes, seeds and the cameras' frames, nothing else): choose an empty or new folder"
             }
         }
     }
+}
+
+/// Does `dir` hold a phantom `synth` wrote and nothing else: scene.json, gt/trajectory.json,
+/// and no top-level entry but those synth writes (its meshes, seeds, ground truth and the
+/// cameras' frame folders)? A session, seeds or results saved into it make it the user's.
+fn is_phantom(dir: &Path) -> bool {
+    if !dir.join("gt/trajectory.json").is_file() {
+        return false;
+    }
+    let Ok(text) = crate::error::read_text(&dir.join("scene.json")) else {
+        return false;
+    };
+    let Ok(scene) = serde_json::from_str::<serde_json::Value>(&text) else {
+        return false;
+    };
+    let mut allowed: Vec<String> = ["scene.json", "meshes", "gt", "seeds"]
+        .map(String::from)
+        .to_vec();
+    if let Some(cameras) = scene["cameras"].as_array() {
+        allowed.extend(
+            cameras
+                .iter()
+                .filter_map(|c| c["name"].as_str().map(String::from)),
+        );
+    }
+    std::fs::read_dir(dir).is_ok_and(|entries| {
+        entries.flatten().all(|e| {
+            e.file_name()
+                .to_str()
+                .is_some_and(|n| allowed.iter().any(|a| a == n))
+        })
+    })
 }
 
 /// Refuses an `out` that replacing would destroy more than an earlier result of.
@@ -86,11 +116,30 @@ pub fn write_whole_over<T>(
     earlier: Earlier,
     write: impl FnOnce(&Path) -> Result<T, Error>,
 ) -> Result<T, Error> {
+    // An empty folder a phantom goes into is written in place: renaming it would refuse the
+    // working folder and mount points, and lose its permissions. On failure it is emptied.
+    let empty = std::fs::read_dir(out).is_ok_and(|mut d| d.next().is_none());
+    if earlier == Earlier::Phantom && out.is_dir() && empty {
+        return write(out).inspect_err(|_| {
+            if let Ok(entries) = std::fs::read_dir(out) {
+                for e in entries.flatten() {
+                    let p = e.path();
+                    let _ = if p.is_dir() && !p.is_symlink() {
+                        std::fs::remove_dir_all(&p)
+                    } else {
+                        std::fs::remove_file(&p)
+                    };
+                }
+            }
+        });
+    }
     check_for(out, inputs, earlier)?;
     let tmp = staging(out)?;
     match write(&tmp) {
         Ok(v) => {
-            commit(&tmp, out)?;
+            commit(&tmp, out).inspect_err(|_| {
+                let _ = std::fs::remove_dir_all(&tmp);
+            })?;
             Ok(v)
         }
         Err(e) => {

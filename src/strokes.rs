@@ -20,6 +20,24 @@ struct Change {
     after: u8,
 }
 
+/// One undo step: a stroke's pixel changes, or an edit made elsewhere (the app's hand moves of
+/// the model) by its id. Both share one history, so Undo takes back whichever came last and
+/// the depth limit drops the oldest of either.
+#[derive(Debug, Clone)]
+enum Step {
+    Stroke(Vec<Change>),
+    Mark(u64),
+}
+
+/// What [`SeedEditor::undo_step`] took back.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Undone {
+    Nothing,
+    Stroke,
+    /// An edit made elsewhere, by the id given to [`SeedEditor::mark`]: its owner undoes it.
+    Mark(u64),
+}
+
 /// Paintable seeds with history.
 #[derive(Debug, Clone, Default)]
 pub struct SeedEditor {
@@ -27,7 +45,7 @@ pub struct SeedEditor {
     layers: Vec<BTreeMap<usize, LabelImage>>,
     /// Camera sizes (width, height).
     sizes: Vec<(usize, usize)>,
-    undo: Vec<Vec<Change>>,
+    undo: Vec<Step>,
     redo: Vec<Vec<Change>>,
     stroke: Option<Vec<Change>>,
     /// Bumped on every change (textures and autosave compare it).
@@ -139,12 +157,35 @@ impl SeedEditor {
         if let Some(s) = self.stroke.take()
             && !s.is_empty()
         {
-            self.undo.push(s);
-            if self.undo.len() > UNDO_STEPS {
-                self.undo.remove(0);
-            }
-            self.redo.clear();
+            self.push(Step::Stroke(s));
         }
+    }
+
+    fn push(&mut self, step: Step) {
+        self.undo.push(step);
+        if self.undo.len() > UNDO_STEPS {
+            self.undo.remove(0);
+        }
+        self.redo.clear();
+    }
+
+    /// Records an edit made elsewhere as the newest undo step (ending a stroke in progress);
+    /// [`SeedEditor::undo_step`] hands its id back when it comes to it. Not redoable.
+    pub fn mark(&mut self, id: u64) {
+        self.end_stroke();
+        self.push(Step::Mark(id));
+    }
+
+    /// Is the newest undo step the mark `id` (nothing recorded since)?
+    pub fn newest_is_mark(&self, id: u64) -> bool {
+        self.stroke.as_ref().is_none_or(|s| s.is_empty())
+            && matches!(self.undo.last(), Some(Step::Mark(m)) if *m == id)
+    }
+
+    /// Drops every mark for which `keep` says no (their edits can no longer be taken back).
+    pub fn forget_marks(&mut self, keep: impl Fn(u64) -> bool) {
+        self.undo
+            .retain(|s| !matches!(s, Step::Mark(m) if !keep(*m)));
     }
 
     pub fn in_stroke(&self) -> bool {
@@ -265,18 +306,27 @@ impl SeedEditor {
         self.undo.len()
     }
 
-    /// Reverts the last stroke.
+    /// Reverts the last stroke, or hands back the last mark; true if there was either.
     pub fn undo(&mut self) -> bool {
+        self.undo_step() != Undone::Nothing
+    }
+
+    /// Takes back the newest undo step: a stroke is reverted here, a mark's id is returned
+    /// for its owner to undo.
+    pub fn undo_step(&mut self) -> Undone {
         self.end_stroke();
-        let Some(s) = self.undo.pop() else {
-            return false;
-        };
-        for c in s.iter().rev() {
-            self.set(c.camera, c.frame, c.index, c.before);
+        match self.undo.pop() {
+            None => Undone::Nothing,
+            Some(Step::Mark(id)) => Undone::Mark(id),
+            Some(Step::Stroke(s)) => {
+                for c in s.iter().rev() {
+                    self.set(c.camera, c.frame, c.index, c.before);
+                }
+                self.redo.push(s);
+                self.revision += 1;
+                Undone::Stroke
+            }
         }
-        self.redo.push(s);
-        self.revision += 1;
-        true
     }
 
     /// Re-applies the last undone stroke.
@@ -287,7 +337,7 @@ impl SeedEditor {
         for c in &s {
             self.set(c.camera, c.frame, c.index, c.after);
         }
-        self.undo.push(s);
+        self.undo.push(Step::Stroke(s));
         self.revision += 1;
         true
     }

@@ -419,6 +419,19 @@ fn synth_replaces_an_earlier_phantom_and_refuses_other_folders() {
         "a frame of the earlier phantom stayed"
     );
 
+    // A phantom the user saved something into is theirs now.
+    std::fs::write(phantom.join("session.endofuse.json"), "{}").unwrap();
+    let refused = synth(&phantom, "2");
+    assert_eq!(refused.status.code(), Some(2));
+    assert!(phantom.join("session.endofuse.json").is_file());
+    assert!(phantom.join("left/000001.png").is_file());
+
+    // An empty folder is written in place (kept, not renamed away).
+    let empty = base.join("empty");
+    std::fs::create_dir_all(&empty).unwrap();
+    assert!(synth(&empty, "2").status.success());
+    assert!(empty.join("scene.json").is_file());
+
     let user = base.join("user");
     std::fs::create_dir_all(&user).unwrap();
     std::fs::write(user.join("notes.txt"), "mine").unwrap();

@@ -147,7 +147,7 @@ impl EndofuseApp {
             // Saved before training: the forest trained since is not the session's.
             None => self.drop_forest(),
         }
-        self.doc.placement_undo.clear();
+        self.doc.forget_placement_undo();
         self.doc.results = s
             .results
             .into_iter()

@@ -175,7 +175,7 @@ impl EndofuseApp {
         self.jobs.forest_epoch += 1;
         doc.placement = scene.initial_pose;
         doc.results.clear();
-        doc.placement_undo.clear();
+        doc.forget_placement_undo();
         self.screen.textures = Default::default();
         self.screen.stroke = Default::default();
         let spec = doc.spec.clone();
@@ -510,6 +510,7 @@ impl EndofuseApp {
                 }
             }
             Event::Initialised(a) => {
+                self.doc.forget_placement_undo();
                 self.doc.placement = Some(a);
                 self.doc.touch();
                 self.status
@@ -544,6 +545,7 @@ impl EndofuseApp {
                 if self.view.follow_tracking {
                     self.view.frame = f.frame;
                 }
+                self.doc.forget_placement_undo();
                 self.doc.results.insert(f.frame, r);
                 self.jobs
                     .fitted_with_current_forest(std::iter::once(f.frame));

@@ -128,41 +128,41 @@ pub struct Document {
 }
 
 /// The model moved by hand on `frame`: the placement before, and the frame's fit the move
-/// discarded. Consecutive moves with nothing else between them are one entry.
+/// set aside. Moves one after another, with nothing else between them, are one entry.
 #[derive(Clone)]
 pub struct PlacementUndo {
+    /// The id of its mark in the stroke editor's history (one history for both).
+    pub id: u64,
     pub frame: usize,
     pub placement: Option<Affine>,
     pub result: Option<FrameResult>,
-    /// The stroke editor's undo depth when the move began: Undo takes back whichever of the
-    /// two came last.
-    pub stroke_steps: usize,
     /// [`Document::edits`] after the latest move of this entry.
     pub edits_after: u64,
 }
 
-/// How many hand moves of the model Undo can take back.
-const PLACEMENT_UNDO_DEPTH: usize = 32;
-
 impl Document {
-    /// Moves the model by hand to `affine` on `frame`, discarding that frame's fit, both kept
-    /// for [`Document::undo`].
+    /// Moves the model by hand to `affine` on `frame`, setting that frame's fit aside; both
+    /// come back with [`Document::undo`].
     pub fn place(&mut self, frame: usize, affine: Affine) {
-        let continuing = self
-            .placement_undo
-            .last()
-            .is_some_and(|u| u.frame == frame && u.edits_after == self.edits);
+        let continuing = self.placement_undo.last().is_some_and(|u| {
+            u.frame == frame && u.edits_after == self.edits && self.editor.newest_is_mark(u.id)
+        });
         if !continuing {
+            let id = self.placement_undo.last().map_or(0, |u| u.id + 1);
             self.placement_undo.push(PlacementUndo {
+                id,
                 frame,
                 placement: self.placement,
                 result: self.results.get(&frame).cloned(),
-                stroke_steps: self.editor.undo_steps(),
                 edits_after: 0,
             });
-            if self.placement_undo.len() > PLACEMENT_UNDO_DEPTH {
-                self.placement_undo.remove(0);
-            }
+            self.editor.mark(id);
+            // The editor's history holds at most as many steps as this list keeps.
+            let oldest = self
+                .placement_undo
+                .len()
+                .saturating_sub(crate::strokes::UNDO_STEPS);
+            self.placement_undo.drain(..oldest);
         }
         self.placement = Some(affine);
         self.results.remove(&frame);
@@ -172,23 +172,27 @@ impl Document {
         }
     }
 
-    /// Is there a stroke or a hand move of the model to take back?
-    pub fn can_undo(&self) -> bool {
-        self.editor.can_undo() || !self.placement_undo.is_empty()
+    /// A fit arrived or the model was placed otherwise: what hand moves set aside can no
+    /// longer be put back over it (it would replace the newer fit).
+    pub fn forget_placement_undo(&mut self) {
+        self.placement_undo.clear();
+        self.editor.forget_marks(|_| false);
     }
 
-    /// Takes back the newer of the last stroke and the last hand move of the model. Returns
-    /// the frame whose fit a move's undo restored, if any.
+    /// Is there a stroke or a hand move of the model to take back?
+    pub fn can_undo(&self) -> bool {
+        self.editor.can_undo()
+    }
+
+    /// Takes back the newest stroke or hand move of the model. Returns the frame whose fit a
+    /// move's undo restored, if any.
     pub fn undo(&mut self) -> Option<usize> {
-        let move_is_newer = self
-            .placement_undo
-            .last()
-            .is_some_and(|u| u.stroke_steps == self.editor.undo_steps());
-        if !move_is_newer {
-            self.editor.undo();
+        let crate::strokes::Undone::Mark(id) = self.editor.undo_step() else {
             return None;
-        }
-        let u = self.placement_undo.pop()?;
+        };
+        let at = self.placement_undo.iter().position(|u| u.id == id)?;
+        let u = self.placement_undo.remove(at);
+        self.placement_undo.truncate(at);
         self.placement = u.placement;
         let restored = u.result.map(|r| {
             self.results.insert(u.frame, r);
@@ -437,11 +441,12 @@ mod tests {
         assert!(!doc.results.contains_key(&3));
         assert_eq!(doc.placement, Some(moved(5.0)));
         stroke(&mut doc, 2);
-        assert_eq!(doc.editor.undo_steps(), 2);
+        // One history: stroke, the five moves as one step, stroke.
+        assert_eq!(doc.editor.undo_steps(), 3);
 
         // The stroke after the move goes first ...
         assert_eq!(doc.undo(), None);
-        assert_eq!(doc.editor.undo_steps(), 1);
+        assert_eq!(doc.editor.undo_steps(), 2);
         assert_eq!(doc.placement, Some(moved(5.0)));
         // ... then the move, with the fit it discarded ...
         assert_eq!(doc.undo(), Some(3));
@@ -453,6 +458,38 @@ mod tests {
         assert_eq!(doc.undo(), None);
         assert_eq!(doc.editor.undo_steps(), 0);
         assert!(!doc.can_undo());
+    }
+
+    /// A stroke between two moves keeps them apart, and Undo takes back the second move,
+    /// the stroke and the first move in that order; a fit that arrives after a move is not
+    /// replaced by the fit the move set aside.
+    #[test]
+    fn strokes_and_moves_undo_newest_first_and_a_newer_fit_is_kept() {
+        let mut doc = Document {
+            editor: SeedEditor::new(&Seeds::default(), vec![(16, 16)]),
+            placement: Some(moved(0.0)),
+            ..Document::default()
+        };
+        doc.results.insert(1, result(1, 5.0));
+        doc.place(1, moved(1.0));
+        stroke(&mut doc, 1);
+        doc.place(1, moved(2.0));
+        assert_eq!(doc.placement_undo.len(), 2);
+        assert_eq!(doc.undo(), None, "the second move: no fit to restore");
+        assert_eq!(doc.placement, Some(moved(1.0)));
+        assert_eq!(doc.editor.undo_steps(), 2, "the stroke is still there");
+        assert_eq!(doc.undo(), None);
+        assert_eq!(doc.editor.undo_steps(), 1, "then the stroke");
+        assert_eq!(doc.undo(), Some(1), "then the first move, with its fit");
+        assert_eq!(doc.placement, Some(moved(0.0)));
+
+        // A move, then a fit of that frame arrives: Undo leaves the new fit alone.
+        doc.place(1, moved(3.0));
+        doc.forget_placement_undo();
+        doc.results.insert(1, result(1, 9.0));
+        assert_eq!(doc.undo(), None);
+        assert_eq!(doc.results.get(&1).map(|r| r.energy), Some(9.0));
+        assert_eq!(doc.placement, Some(moved(3.0)));
     }
 
     /// Moves separated by something else (here a fit arriving) are separate undo steps.

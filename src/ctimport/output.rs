@@ -103,7 +103,13 @@ pub fn staging(out: &Path) -> Result<PathBuf, Error> {
 /// Moves the staged folder onto `out`. What was there is moved aside first and removed only
 /// once the new folder is in place, so a failed rename loses nothing.
 pub fn commit(tmp: &Path, out: &Path) -> Result<(), Error> {
-    let aside = tmp.with_extension("replaced");
+    // Named after the staging folder, process id included: one left by a killed run does not
+    // block the next.
+    let aside = tmp.with_file_name(format!(
+        "{}.replaced",
+        tmp.file_name()
+            .map_or_else(Default::default, |n| n.to_string_lossy())
+    ));
     let had_old = out.exists();
     if had_old {
         std::fs::rename(out, &aside).map_err(|source| Error::Write {

@@ -19,7 +19,7 @@ pub enum MeshError {
     )]
     NonFiniteVertex { vertex: usize, position_mm: DVec3 },
     #[error(
-        "vertex {} lies {distance_mm:.3e} mm from the origin: a mesh is in millimetres, within 1 km",
+        "vertex {} has a coordinate of {distance_mm:.3e} mm: a mesh is in millimetres, within 1 km of its origin",
         .vertex + 1
     )]
     FarVertex { vertex: usize, distance_mm: f64 },
@@ -69,10 +69,14 @@ impl Mesh {
         }
         // Squared extents of 1e300 overflow to infinity, and every face then looked like
         // zero area: a vertex that far is said as what it is.
-        if let Some(i) = self.vertices.iter().position(|v| v.length() > 1e6) {
+        if let Some(i) = self
+            .vertices
+            .iter()
+            .position(|v| v.abs().max_element() > 1e6)
+        {
             return Err(MeshError::FarVertex {
                 vertex: i,
-                distance_mm: self.vertices[i].length(),
+                distance_mm: self.vertices[i].abs().max_element(),
             });
         }
         let n = self.vertices.len() as u32;

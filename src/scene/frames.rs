@@ -225,13 +225,17 @@ impl FrameCache {
 }
 
 fn missing(path: &Path) -> Result<(), InputError> {
-    if path.is_file() {
-        Ok(())
-    } else {
-        Err(InputError::new(
+    match std::fs::metadata(path) {
+        Ok(m) if m.is_file() => Ok(()),
+        Ok(m) if m.is_dir() => Err(InputError::new(path, "is a folder, not a frame image")),
+        Ok(_) => Err(InputError::new(
+            path,
+            "is not a regular file (a pipe or a device), not a frame image",
+        )),
+        Err(_) => Err(InputError::new(
             path,
             "missing frame (the camera's frames template names it, and the scene's frame_count includes it)",
-        ))
+        )),
     }
 }
 

@@ -76,12 +76,11 @@ pub enum AffineError {
     )]
     Degenerate { determinant: f64 },
     #[error(
-        "'affine' scales the model by more than 100× or moves it {translation_mm:.3e} mm (determinant {determinant:.3e}): a pose is within 100× scale and 100 m"
+        "'affine' scales the model by more than 100× (a linear entry of {largest:.3e}): meshes and poses are in millimetres"
     )]
-    OutOfRange {
-        determinant: f64,
-        translation_mm: f64,
-    },
+    Scale { largest: f64 },
+    #[error("'affine' moves the model {translation_mm:.3e} mm, more than 100 m")]
+    Far { translation_mm: f64 },
 }
 
 /// Cameras and structures name output folders, so their names must be safe as folder names.
@@ -238,9 +237,13 @@ pub fn validate_affine(q: &[f64]) -> Result<Affine, AffineError> {
         a.q[..9].iter().fold(0.0f64, |m, v| m.max(v.abs())),
         DVec3::new(a.q[9], a.q[10], a.q[11]).length(),
     );
-    if determinant > 1e6 || linear_max > 100.0 || translation > 1e5 {
-        return Err(AffineError::OutOfRange {
-            determinant,
+    if determinant > 1e6 || linear_max > 100.0 {
+        return Err(AffineError::Scale {
+            largest: linear_max,
+        });
+    }
+    if translation > 1e5 {
+        return Err(AffineError::Far {
             translation_mm: translation,
         });
     }

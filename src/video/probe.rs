@@ -59,6 +59,12 @@ pub(crate) fn probe(path: &Path, tools: &Tools) -> Result<Probed, VideoError> {
         }
         Err(e) => return Err(unreadable(e.to_string())),
         Ok(m) if m.is_dir() => return Err(unreadable("a folder, not a video file".into())),
+        // ffprobe would wait on a pipe for ever.
+        Ok(m) if !m.is_file() => {
+            return Err(unreadable(
+                "not a regular file (a pipe or a device): give the video file itself".into(),
+            ));
+        }
         Ok(_) => {}
     }
     let (stream, origin, avi) = stream_info(path, tools)?;
