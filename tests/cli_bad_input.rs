@@ -16,6 +16,7 @@ fn info(scene: &Path) -> (i32, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_endofuse"))
         .arg("info")
         .arg(scene)
+        .env_remove("RUST_LOG")
         .output()
         .unwrap();
     (
@@ -488,4 +489,19 @@ fn doubtful_inputs_warn_on_stderr_by_default() {
     assert!(out.join("scene.json").exists());
     let _ = std::fs::remove_dir_all(&dir);
     let _ = std::fs::remove_dir_all(out.parent().unwrap());
+
+    // Camera 0 is the reference: extrinsics of its own are used, and said.
+    let dir = scratch("camera0-moved");
+    edit_json(&dir, |j| {
+        j["cameras"][0]["translation"] = serde_json::json!([5, 0, 0]);
+    });
+    let (code, stderr) = info(&dir);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(
+        stderr
+            .lines()
+            .any(|l| l.starts_with("warning:") && l.contains("camera 0")),
+        "{stderr}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -173,6 +173,25 @@ impl Scene {
         let mut videos = frames::VideoReaders::default();
         for (i, c) in file.cameras.iter().enumerate() {
             let (camera, spec) = validate_camera(c, i).map_err(|e| bad(e.to_string()))?;
+            // CONTRACT §2: rotation and translation map camera-0 coordinates into each camera,
+            // so camera 0's are the identity. A tool that wrote a world frame instead gets its
+            // rig used as written, and told.
+            let e = &camera.extrinsics;
+            if i == 0
+                && ((e.rotation - glam::DMat3::IDENTITY)
+                    .to_cols_array()
+                    .iter()
+                    .any(|v| v.abs() > 1e-6)
+                    || e.translation_mm.length() > 1e-6)
+            {
+                log::warn!(
+                    "{}: camera 0 ('{}') has a rotation or translation that is not the identity; \
+                     the scene format makes camera 0 the reference (its coordinates are the \
+                     model's), so poses are read in a frame that camera 0 does not see from",
+                    json_path.display(),
+                    camera.name
+                );
+            }
             if cameras.iter().any(|k: &Camera| k.name == camera.name) {
                 return Err(bad(format!("two cameras are named '{}'", camera.name)));
             }
