@@ -168,6 +168,33 @@ mod tests {
         d
     }
 
+    /// What a killed run left beside `--out` (its process gone) is removed by the next run.
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn a_killed_runs_staging_folder_is_removed_by_the_next() {
+        let out = scratch("killed");
+        let parent = out.parent().unwrap();
+        let name = out.file_name().unwrap().to_string_lossy().to_string();
+        // Above Linux's largest process id (2²²): no such process can exist.
+        let left = parent.join(format!(".{name}.partial-999999999"));
+        let aside = parent.join(format!(".{name}.partial-999999998.replaced"));
+        for d in [&left, &aside] {
+            std::fs::create_dir_all(d.join("masks")).unwrap();
+        }
+        write_whole(&out, &[], |tmp| {
+            std::fs::write(tmp.join("metrics.json"), "{}").map_err(|source| Error::Write {
+                path: tmp.to_path_buf(),
+                source,
+            })
+        })
+        .unwrap();
+        assert!(
+            !left.exists() && !aside.exists(),
+            "left-overs of a dead run stayed"
+        );
+        let _ = std::fs::remove_dir_all(&out);
+    }
+
     #[test]
     fn a_failed_run_leaves_the_earlier_result_and_no_staging_folder() {
         let out = scratch("earlier");

@@ -869,7 +869,7 @@ fn malformed_frames() {
         case(
             "frame-is-a-folder",
             "scene/left/000001.png",
-            &["missing frame"],
+            &["is a folder, not a frame image"],
             |r| {
                 info(&scene(r, |s| {
                     std::fs::remove_file(s.join("left/000001.png")).unwrap();

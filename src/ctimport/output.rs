@@ -93,11 +93,39 @@ pub fn staging(out: &Path) -> Result<PathBuf, Error> {
     })?;
     let tmp = parent.join(format!(".{name}.partial-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&tmp);
+    remove_left_by_dead_runs(parent, &name);
     std::fs::create_dir_all(&tmp).map_err(|source| Error::Write {
         path: tmp.clone(),
         source,
     })?;
     Ok(tmp)
+}
+
+/// Removes `.NAME.partial-PID` folders (and their `.replaced` set-asides) beside `out` whose
+/// process is gone: what a killed or crashed run left. Where the system cannot say whether a
+/// process lives (no /proc), nothing is removed.
+fn remove_left_by_dead_runs(parent: &Path, name: &str) {
+    if !Path::new("/proc/self").exists() {
+        return;
+    }
+    let prefix = format!(".{name}.partial-");
+    let Ok(entries) = std::fs::read_dir(parent) else {
+        return;
+    };
+    for e in entries.flatten() {
+        let file = e.file_name();
+        let Some(rest) = file.to_str().and_then(|f| f.strip_prefix(&prefix)) else {
+            continue;
+        };
+        let pid = rest.strip_suffix(".replaced").unwrap_or(rest);
+        let Ok(pid) = pid.parse::<u32>() else {
+            continue;
+        };
+        let is_dir = e.file_type().is_ok_and(|t| t.is_dir());
+        if is_dir && pid != std::process::id() && !Path::new(&format!("/proc/{pid}")).exists() {
+            let _ = std::fs::remove_dir_all(e.path());
+        }
+    }
 }
 
 /// Moves the staged folder onto `out`. What was there is moved aside first and removed only

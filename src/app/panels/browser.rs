@@ -116,6 +116,16 @@ impl Browser {
 
     /// Answers with the target: a folder named but missing is made; saving over a file asks.
     pub fn confirm(&mut self) -> Option<PathBuf> {
+        // A folder named where a file is wanted (typed or pasted whole): show it.
+        let named = self.folder.join(self.name.trim());
+        if matches!(self.picker, Picker::OpenFile { .. })
+            && !self.name.trim().is_empty()
+            && named.is_dir()
+        {
+            self.name.clear();
+            self.enter(named);
+            return None;
+        }
         let target = match self.target() {
             Ok(t) => t,
             Err(e) => {
@@ -411,6 +421,10 @@ mod tests {
         let mut b = Browser::new(FileRequest::OpenScene, &d.join("sub"));
         b.name = d.join("scene.json").display().to_string();
         assert_eq!(b.confirm(), Some(d.join("scene.json")));
+        // A folder pasted there opens it.
+        b.name = d.join("sub").display().to_string();
+        assert!(b.confirm().is_none());
+        assert_eq!(b.folder, d.join("sub"));
         b.name = d.join("nowhere/scene.json").display().to_string();
         assert!(b.confirm().is_none());
         assert!(b.error.as_deref().is_some_and(|e| e.contains("nowhere")));
