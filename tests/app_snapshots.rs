@@ -385,4 +385,12 @@ fn tracking_after_a_live_preview_retrains_the_full_forest_first() {
     });
     h.run();
     h.get_by_label_contains("2 of 2 fitted frames were fitted with an earlier forest");
+    // A stroke after training (live update off) is said to be unlearned until the next Train.
+    assert!(
+        h.query_by_label_contains("strokes changed since the forest")
+            .is_none()
+    );
+    background_stroke_above_the_kidney(&mut h, 1);
+    h.run();
+    h.get_by_label_contains("The strokes changed since the forest was trained");
 }

@@ -48,6 +48,10 @@ pub struct Jobs {
     /// fits of an earlier forest are said to be so, not shown as current.
     forest_generation: u64,
     fit_generation: HashMap<usize, u64>,
+    /// The strokes' revision the pending Train was sent with, and the one the forest in use
+    /// learned (None where unknown: a forest loaded from a session).
+    train_revision: u64,
+    pub forest_revision: Option<u64>,
     /// The forest in use awaits its held-out figure (Command::Validate sent).
     pub validating: bool,
     /// Strokes changed at this time (s) and a live retrain is due.
@@ -215,6 +219,8 @@ impl EndofuseApp {
 
     /// The forest is another one (trained, loaded or dropped): the maps of the one before go.
     fn forest_changed(&mut self, forest: Option<Arc<crate::appearance::Appearance>>) {
+        // Which strokes it learned is known only for a Trained forest (set after this).
+        self.jobs.forest_revision = None;
         let frame = self.view.frame;
         let keep = forest
             .is_some()
@@ -277,6 +283,7 @@ impl EndofuseApp {
         self.sync_seeds();
         self.jobs.retrain_due_s = None;
         self.jobs.train_epoch = self.jobs.forest_epoch;
+        self.jobs.train_revision = self.doc.editor.revision;
         self.send_job(Command::Train(self.forest_params(live)));
     }
 
@@ -445,6 +452,7 @@ impl EndofuseApp {
                     a.stats.samples, a.stats.train_s
                 ));
                 self.forest_changed(Some(a));
+                self.jobs.forest_revision = Some(self.jobs.train_revision);
                 if self.view.layer == Layer::Image {
                     self.view.layer = Layer::Probability(self.view.class);
                 }

@@ -262,6 +262,19 @@ fn side_contents(shown: &Shown, ui: &mut egui::Ui) {
         action_button(shown, ui, Action::Track, idle && trained);
         action_button(shown, ui, Action::Review, true);
     });
+    // Strokes painted or undone since the forest learned them (live update retrains by itself).
+    if !settings.live_update
+        && doc.appearance.is_some()
+        && shown
+            .jobs
+            .forest_revision
+            .is_some_and(|r| r != doc.editor.revision)
+    {
+        ui.colored_label(
+            Color32::from_rgb(255, 190, 70),
+            "The strokes changed since the forest was trained: train again (T) to use them.",
+        );
+    }
     let older = shown
         .jobs
         .fits_of_earlier_forests(doc.results.keys().copied());
