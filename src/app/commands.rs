@@ -193,9 +193,7 @@ impl EndofuseApp {
             Action::BrushSmaller => self.resize_brush(0.8),
             Action::BrushBigger => self.resize_brush(1.25),
             Action::Undo => {
-                let moves = self.doc.placement_undo.len();
-                let restored = self.doc.undo();
-                if self.doc.placement_undo.len() < moves {
+                if let crate::app::state::Undid::Move { restored } = self.doc.undo() {
                     self.screen.textures.forget_overlays();
                     self.status.notify(match restored {
                         Some(t) => format!("Model move undone: frame {t}'s fit is back."),

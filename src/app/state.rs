@@ -140,6 +140,17 @@ pub struct PlacementUndo {
     pub edits_after: u64,
 }
 
+/// What [`Document::undo`] took back.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Undid {
+    Nothing,
+    Stroke,
+    /// A hand move of the model; `restored`: the frame whose fit came back with it.
+    Move {
+        restored: Option<usize>,
+    },
+}
+
 impl Document {
     /// Moves the model by hand to `affine` on `frame`, setting that frame's fit aside; both
     /// come back with [`Document::undo`].
@@ -184,13 +195,16 @@ impl Document {
         self.editor.can_undo()
     }
 
-    /// Takes back the newest stroke or hand move of the model. Returns the frame whose fit a
-    /// move's undo restored, if any.
-    pub fn undo(&mut self) -> Option<usize> {
-        let crate::strokes::Undone::Mark(id) = self.editor.undo_step() else {
-            return None;
+    /// Takes back the newest stroke or hand move of the model, saying which it was.
+    pub fn undo(&mut self) -> Undid {
+        let id = match self.editor.undo_step() {
+            crate::strokes::Undone::Nothing => return Undid::Nothing,
+            crate::strokes::Undone::Stroke => return Undid::Stroke,
+            crate::strokes::Undone::Mark(id) => id,
         };
-        let at = self.placement_undo.iter().position(|u| u.id == id)?;
+        let Some(at) = self.placement_undo.iter().position(|u| u.id == id) else {
+            return Undid::Nothing;
+        };
         let u = self.placement_undo.remove(at);
         self.placement_undo.truncate(at);
         self.placement = u.placement;
@@ -199,7 +213,7 @@ impl Document {
             u.frame
         });
         self.touch();
-        restored
+        Undid::Move { restored }
     }
 
     /// True when anything a session keeps changed since the last save.
@@ -445,17 +459,17 @@ mod tests {
         assert_eq!(doc.editor.undo_steps(), 3);
 
         // The stroke after the move goes first ...
-        assert_eq!(doc.undo(), None);
+        assert_eq!(doc.undo(), Undid::Stroke);
         assert_eq!(doc.editor.undo_steps(), 2);
         assert_eq!(doc.placement, Some(moved(5.0)));
         // ... then the move, with the fit it discarded ...
-        assert_eq!(doc.undo(), Some(3));
+        assert_eq!(doc.undo(), Undid::Move { restored: Some(3) });
         assert_eq!(doc.placement, Some(moved(0.0)));
         assert_eq!(doc.results.get(&3), Some(&result(3, 7.0)));
         assert!(doc.placement_undo.is_empty());
         // ... then the stroke before it.
         assert!(doc.can_undo());
-        assert_eq!(doc.undo(), None);
+        assert_eq!(doc.undo(), Undid::Stroke);
         assert_eq!(doc.editor.undo_steps(), 0);
         assert!(!doc.can_undo());
     }
@@ -475,19 +489,27 @@ mod tests {
         stroke(&mut doc, 1);
         doc.place(1, moved(2.0));
         assert_eq!(doc.placement_undo.len(), 2);
-        assert_eq!(doc.undo(), None, "the second move: no fit to restore");
+        assert_eq!(
+            doc.undo(),
+            Undid::Move { restored: None },
+            "the second move: no fit to restore"
+        );
         assert_eq!(doc.placement, Some(moved(1.0)));
         assert_eq!(doc.editor.undo_steps(), 2, "the stroke is still there");
-        assert_eq!(doc.undo(), None);
+        assert_eq!(doc.undo(), Undid::Stroke);
         assert_eq!(doc.editor.undo_steps(), 1, "then the stroke");
-        assert_eq!(doc.undo(), Some(1), "then the first move, with its fit");
+        assert_eq!(
+            doc.undo(),
+            Undid::Move { restored: Some(1) },
+            "then the first move, with its fit"
+        );
         assert_eq!(doc.placement, Some(moved(0.0)));
 
         // A move, then a fit of that frame arrives: Undo leaves the new fit alone.
         doc.place(1, moved(3.0));
         doc.forget_placement_undo();
         doc.results.insert(1, result(1, 9.0));
-        assert_eq!(doc.undo(), None);
+        assert_eq!(doc.undo(), Undid::Nothing);
         assert_eq!(doc.results.get(&1).map(|r| r.energy), Some(9.0));
         assert_eq!(doc.placement, Some(moved(3.0)));
     }
@@ -504,9 +526,9 @@ mod tests {
         doc.touch();
         doc.place(0, moved(2.0));
         assert_eq!(doc.placement_undo.len(), 2);
-        assert_eq!(doc.undo(), Some(0));
+        assert_eq!(doc.undo(), Undid::Move { restored: Some(0) });
         assert_eq!(doc.placement, Some(moved(1.0)));
-        assert_eq!(doc.undo(), None);
+        assert_eq!(doc.undo(), Undid::Move { restored: None });
         assert_eq!(doc.placement, None);
         assert!(doc.results.get(&0).is_some_and(|r| r.energy == 2.0));
     }
