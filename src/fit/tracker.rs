@@ -635,7 +635,7 @@ pub fn track(
             zoom_uncertain,
             zoom_corrected,
             refused,
-        } = tracker.frame(t, &mut views)?;
+        } = crate::pool::on_workers(|| tracker.frame(t, &mut views))?;
         if zoom_uncertain {
             tracker.zoom_history = tracker
                 .zoom_history
