@@ -219,11 +219,8 @@ impl ViewProbabilities {
                 x1 = x1.max(ox + ow - 1);
                 y1 = y1.max(oy + oh - 1);
             }
-            // Margin: the widest window, plus 2 px of slack. A tracked frame builds its lines
-            // once, and later requests (stereo patches, the output's occluder check) lie inside
-            // the lines' box; 16 px of slack made the box 6 % larger (403 LS: 224,238 against
-            // 210,268 pixels a frame) for no saved rebuild.
-            let margin = crate::appearance::features::reach_for_level(level) + 2;
+            // Margin: the widest window, plus slack so small motions need no rebuild.
+            let margin = crate::appearance::features::reach_for_level(level) + 16;
             let (iw, ih) = (image.width() as usize, image.height() as usize);
             let (rx0, ry0) = (x0.saturating_sub(margin), y0.saturating_sub(margin));
             let (rx1, ry1) = ((x1 + margin).min(iw - 1), (y1 + margin).min(ih - 1));
