@@ -20,9 +20,6 @@ use super::stereo::{StereoSet, StereoTerm};
 use nalgebra::DMatrix;
 use rayon::prelude::*;
 
-/// Lines summed together before their sums meet (see [`joint_information`]).
-const LINES_PER_CHUNK: usize = 32;
-
 /// The rig's shared intrinsics among the columns: fx (fy following at the calibrated aspect),
 /// cx, cy, as the camera block moves them.
 pub const CAMERA_COLUMNS: usize = 3;
@@ -132,47 +129,33 @@ pub fn joint_information(
     let mut h = DMatrix::zeros(n, n);
     let deformed = model.deformed(&state.shape);
     let rotation_centre = ctx.rotation_centre(state, &deformed);
-    // Lines in fixed chunks, each summed in order on whichever thread takes it, the chunks'
-    // sums added in chunk order: the same matrix however many threads there are. (Serial, the
-    // lines' Jacobians were ~1 ms of a 13 ms frame with the second core idle.)
-    let line_block = |chunk: &[Line]| {
-        let mut h = DMatrix::zeros(n, n);
-        let mut row = Vec::with_capacity(n);
-        let (mut shift2, mut shifts) = (0.0, 0usize);
-        'lines: for line in chunk {
-            row.clear();
+    // Each line's row in parallel (its Jacobians are the cost), added up in the lines' order:
+    // the same matrix as a serial loop, bit for bit, however many threads.
+    let line_rows: Vec<Option<(Vec<f64>, f64, f64)>> = lines
+        .par_iter()
+        .map(|line| {
+            let mut row = Vec::with_capacity(n);
             let mut c = None;
             for &block in &blocks {
-                let Some((at, j)) =
-                    ctx.line_jacobian(line, state, &deformed, block, ep.level, rotation_centre)
-                else {
-                    continue 'lines;
-                };
+                let (at, j) =
+                    ctx.line_jacobian(line, state, &deformed, block, ep.level, rotation_centre)?;
                 c = Some(at);
                 row.extend(j);
             }
-            let Some((at, j)) =
-                ctx.line_jacobian(line, state, &deformed, cameras, ep.level, rotation_centre)
-            else {
-                continue;
-            };
+            let (at, j) =
+                ctx.line_jacobian(line, state, &deformed, cameras, ep.level, rotation_centre)?;
             row.extend(shared_camera_row(ctx, &j, state));
             let (shift, variance) = target::line_target(line, c.unwrap_or(at), ep);
-            add_row(&mut h, &row, 1.0 / variance);
-            if variance != ep.saturated_line_variance_px2 && shift.is_finite() {
-                shift2 += shift * shift;
-                shifts += 1;
-            }
-        }
-        (h, shift2, shifts)
-    };
-    let chunks: Vec<(DMatrix<f64>, f64, usize)> =
-        lines.par_chunks(LINES_PER_CHUNK).map(line_block).collect();
+            Some((row, shift, variance))
+        })
+        .collect();
     let (mut shift2, mut shifts) = (0.0, 0usize);
-    for (chunk_h, chunk_shift2, chunk_shifts) in chunks {
-        h += chunk_h;
-        shift2 += chunk_shift2;
-        shifts += chunk_shifts;
+    for (row, shift, variance) in line_rows.into_iter().flatten() {
+        add_row(&mut h, &row, 1.0 / variance);
+        if variance != ep.saturated_line_variance_px2 && shift.is_finite() {
+            shift2 += shift * shift;
+            shifts += 1;
+        }
     }
     if shifts > 0 {
         let level_px = 1.0 / crate::geometry::camera::level_scale(ep.level);
