@@ -248,6 +248,7 @@ fn run(cli: Cli) -> Result<()> {
             let scene = endofuse::open::scene(&scene)?;
             if !quick {
                 scene.decode_frames(&progress_every("info: decoding", 20))?;
+                scene.decode_ground_truth(&progress_every("info: ground truth", 20))?;
             }
             let model = Model::build(&scene)?;
             print!("{}", endofuse::info::summary(&scene, &model.shape));

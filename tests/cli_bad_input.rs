@@ -267,6 +267,23 @@ fn bad_frames() {
     expect_bad(&d, "left/000000.png", "10×10 but the camera is 64×48");
 }
 
+/// Ground truth that `track` would refuse is refused by `info` already (the headers were
+/// checked before; a truncated body or a 16-bit image passed until a run read them).
+#[test]
+fn bad_ground_truth() {
+    let d = scratch("truncated-truth");
+    let p = d.join("gt/right/000001.png");
+    let bytes = std::fs::read(&p).unwrap();
+    std::fs::write(&p, &bytes[..bytes.len() / 2]).unwrap();
+    expect_bad(&d, "gt/right/000001.png", "cannot decode label image");
+
+    let d = scratch("sixteen-bit-truth");
+    image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::new(64, 48)
+        .save(d.join("gt/left/000000.png"))
+        .unwrap();
+    expect_bad(&d, "gt/left/000000.png", "must be 8-bit grey");
+}
+
 #[test]
 fn bad_seeds() {
     let d = scratch("seed-size");

@@ -501,6 +501,35 @@ impl Scene {
         Ok(())
     }
 
+    /// Decodes every ground-truth image (label images and hidden structures' masks) as `track`
+    /// will read them: `info` then refuses what `track` would, not after a run.
+    pub fn decode_ground_truth(&self, progress: &dyn Fn(usize, usize)) -> Result<(), InputError> {
+        for t in 0..self.frame_count {
+            for c in 0..self.cameras.len() {
+                if let Some(labels) = self.ground_truth_labels(c, t) {
+                    labels?;
+                }
+            }
+            progress(t + 1, self.frame_count);
+        }
+        let (Some(template), Some(root)) = (&self.ground_truth.hidden, &self.root) else {
+            return Ok(());
+        };
+        for st in self.structures.iter().filter(|s| !s.visible) {
+            for (c, cam) in self.cameras.iter().enumerate() {
+                for t in 0..self.frame_count {
+                    let path = root.join(template.expand(t, &cam.name, &st.name));
+                    if path.exists() {
+                        labels::read_label_png_sized(&path, |w, h| {
+                            self.check_label_size(&path, w, h, c)
+                        })?;
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
     fn load_seeds(&self, template: &PathTemplate) -> Result<Seeds, InputError> {
         let root = self.root.clone().unwrap_or_default();
         let mut seeds = Seeds {
