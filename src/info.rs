@@ -38,12 +38,13 @@ pub fn summary(scene: &Scene, shape: &JointShapeModel) -> String {
         };
         let _ = writeln!(
             s,
-            "  {:<12} label {:<3} {:<8} {:>5} vertices {:>5} faces  {}  ({})",
+            "  {:<12} label {:<3} {:<8} {:>5} vertices {:>5} faces  {}  {}  ({})",
             st.name,
             st.label,
             if st.visible { "visible" } else { "hidden" },
             count,
             st.mesh.faces.len(),
+            surface(&st.mesh),
             catalog,
             st.mesh_path.display()
         );
@@ -154,6 +155,34 @@ pub fn summary(scene: &Scene, shape: &JointShapeModel) -> String {
 }
 
 /// "0, 1, 2" or "0–9, 20" for a sorted list.
+/// Whether a mesh is a closed surface, in words: an open or non-manifold one still fits (its
+/// back faces are not culled, its holes' borders give no contour), but a CT surface should be
+/// closed, and a hole often means an export went wrong.
+fn surface(mesh: &crate::geometry::Mesh) -> String {
+    if crate::fit::model::is_closed(&mesh.faces) {
+        return if mesh.signed_volume() < 0.0 {
+            "closed, wound inwards".into()
+        } else {
+            "closed".into()
+        };
+    }
+    let mut uses: std::collections::HashMap<(u32, u32), u32> = Default::default();
+    for f in &mesh.faces {
+        for k in 0..3 {
+            let (a, b) = (f[k], f[(k + 1) % 3]);
+            *uses.entry((a.min(b), a.max(b))).or_default() += 1;
+        }
+    }
+    let open = uses.values().filter(|&&n| n == 1).count();
+    let shared = uses.values().filter(|&&n| n > 2).count();
+    match (open, shared) {
+        (0, 0) => "not closed (faces wound inconsistently)".into(),
+        (o, 0) => format!("open ({o} edges on one face only)"),
+        (0, n) => format!("not closed ({n} edges on 3+ faces)"),
+        (o, n) => format!("open ({o} edges on one face only, {n} on 3+)"),
+    }
+}
+
 fn list(v: &[usize]) -> String {
     let mut out: Vec<String> = Vec::new();
     let mut i = 0;
@@ -173,4 +202,29 @@ fn list(v: &[usize]) -> String {
         i = j + 1;
     }
     out.join(", ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::surface;
+    use crate::geometry::Mesh;
+    use glam::DVec3;
+
+    fn tetrahedron(faces: Vec<[u32; 3]>) -> Mesh {
+        let v = vec![DVec3::ZERO, DVec3::X, DVec3::Y, DVec3::Z];
+        Mesh::new(v, faces)
+    }
+
+    /// A closed tetrahedron either way round, and with a face missing.
+    #[test]
+    fn surfaces_are_told_closed_inwards_or_open() {
+        let outward = vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]];
+        assert_eq!(surface(&tetrahedron(outward.clone())), "closed");
+        let inward: Vec<[u32; 3]> = outward.iter().map(|&[a, b, c]| [a, c, b]).collect();
+        assert_eq!(surface(&tetrahedron(inward)), "closed, wound inwards");
+        assert_eq!(
+            surface(&tetrahedron(outward[..3].to_vec())),
+            "open (3 edges on one face only)"
+        );
+    }
 }
