@@ -154,7 +154,6 @@ pub fn summary(scene: &Scene, shape: &JointShapeModel) -> String {
     s
 }
 
-/// "0, 1, 2" or "0–9, 20" for a sorted list.
 /// Whether a mesh is a closed surface, in words: an open or non-manifold one still fits (its
 /// back faces are not culled, its holes' borders give no contour), but a CT surface should be
 /// closed, and a hole often means an export went wrong.
@@ -183,6 +182,7 @@ fn surface(mesh: &crate::geometry::Mesh) -> String {
     }
 }
 
+/// "0, 1, 2" or "0–9, 20" for a sorted list.
 fn list(v: &[usize]) -> String {
     let mut out: Vec<String> = Vec::new();
     let mut i = 0;

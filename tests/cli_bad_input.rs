@@ -282,6 +282,18 @@ fn bad_ground_truth() {
         .save(d.join("gt/left/000000.png"))
         .unwrap();
     expect_bad(&d, "gt/left/000000.png", "must be 8-bit grey");
+
+    // A hidden structure's mask (the default place, `gt/hidden/{structure}/{camera}/…`).
+    let d = scratch("truncated-hidden-mask");
+    let bytes = std::fs::read(d.join("gt/left/000001.png")).unwrap();
+    let mask = d.join("gt/hidden/hidden/left/000001.png");
+    std::fs::create_dir_all(mask.parent().unwrap()).unwrap();
+    std::fs::write(&mask, &bytes[..bytes.len() / 2]).unwrap();
+    expect_bad(
+        &d,
+        "gt/hidden/hidden/left/000001.png",
+        "cannot decode label image",
+    );
 }
 
 #[test]

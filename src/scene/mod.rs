@@ -502,30 +502,40 @@ impl Scene {
     }
 
     /// Decodes every ground-truth image (label images and hidden structures' masks) as `track`
-    /// will read them: `info` then refuses what `track` would, not after a run.
+    /// will read them: `info` then refuses what `track` would, not after a run. Ground truth
+    /// given in memory was made by the program and is not checked; without files, nothing is
+    /// read and no progress reported.
     pub fn decode_ground_truth(&self, progress: &dyn Fn(usize, usize)) -> Result<(), InputError> {
+        let gt = &self.ground_truth;
+        let Some(root) = &self.root else {
+            return Ok(());
+        };
+        let hidden: Vec<&Structure> = self.structures.iter().filter(|s| !s.visible).collect();
+        let labels = gt.labels.as_ref().filter(|_| gt.memory_labels.is_none());
+        let masks = gt.hidden.as_ref().filter(|_| !hidden.is_empty());
+        if labels.is_none() && masks.is_none() {
+            return Ok(());
+        }
         for t in 0..self.frame_count {
-            for c in 0..self.cameras.len() {
-                if let Some(labels) = self.ground_truth_labels(c, t) {
-                    labels?;
+            for (c, cam) in self.cameras.iter().enumerate() {
+                let mut paths = Vec::new();
+                if let Some(l) = labels {
+                    paths.push(root.join(l.expand(t, &cam.name, "")));
+                }
+                if let Some(h) = masks {
+                    paths.extend(
+                        hidden
+                            .iter()
+                            .map(|s| root.join(h.expand(t, &cam.name, &s.name))),
+                    );
+                }
+                for path in paths.iter().filter(|p| p.exists()) {
+                    labels::read_label_png_sized(path, |w, h| {
+                        self.check_label_size(path, w, h, c)
+                    })?;
                 }
             }
             progress(t + 1, self.frame_count);
-        }
-        let (Some(template), Some(root)) = (&self.ground_truth.hidden, &self.root) else {
-            return Ok(());
-        };
-        for st in self.structures.iter().filter(|s| !s.visible) {
-            for (c, cam) in self.cameras.iter().enumerate() {
-                for t in 0..self.frame_count {
-                    let path = root.join(template.expand(t, &cam.name, &st.name));
-                    if path.exists() {
-                        labels::read_label_png_sized(&path, |w, h| {
-                            self.check_label_size(&path, w, h, c)
-                        })?;
-                    }
-                }
-            }
         }
         Ok(())
     }
