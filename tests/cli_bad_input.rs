@@ -51,6 +51,13 @@ fn expect_bad(dir: &Path, file: &str, words: &str) {
     let _ = std::fs::remove_dir_all(dir);
 }
 
+/// Writes the first half of `from`'s bytes to `to` (a PNG cut inside its pixel data: the
+/// fixture's small images keep a whole header).
+fn write_first_half(from: &Path, to: &Path) {
+    let bytes = std::fs::read(from).unwrap();
+    std::fs::write(to, &bytes[..bytes.len() / 2]).unwrap();
+}
+
 #[test]
 fn the_fixture_itself_is_accepted() {
     let (code, stderr) = info(&fixture());
@@ -255,9 +262,7 @@ fn bad_frames() {
     expect_bad(&d, "right/000001.png", "missing frame");
 
     let d = scratch("truncated-frame");
-    let p = d.join("left/000001.png");
-    let bytes = std::fs::read(&p).unwrap();
-    std::fs::write(&p, &bytes[..bytes.len() / 2]).unwrap();
+    write_first_half(&d.join("left/000001.png"), &d.join("left/000001.png"));
     expect_bad(&d, "left/000001.png", "cannot decode");
 
     let d = scratch("frame-size");
@@ -272,9 +277,10 @@ fn bad_frames() {
 #[test]
 fn bad_ground_truth() {
     let d = scratch("truncated-truth");
-    let p = d.join("gt/right/000001.png");
-    let bytes = std::fs::read(&p).unwrap();
-    std::fs::write(&p, &bytes[..bytes.len() / 2]).unwrap();
+    write_first_half(
+        &d.join("gt/right/000001.png"),
+        &d.join("gt/right/000001.png"),
+    );
     expect_bad(&d, "gt/right/000001.png", "cannot decode label image");
 
     let d = scratch("sixteen-bit-truth");
@@ -285,10 +291,9 @@ fn bad_ground_truth() {
 
     // A hidden structure's mask (the default place, `gt/hidden/{structure}/{camera}/…`).
     let d = scratch("truncated-hidden-mask");
-    let bytes = std::fs::read(d.join("gt/left/000001.png")).unwrap();
     let mask = d.join("gt/hidden/hidden/left/000001.png");
     std::fs::create_dir_all(mask.parent().unwrap()).unwrap();
-    std::fs::write(&mask, &bytes[..bytes.len() / 2]).unwrap();
+    write_first_half(&d.join("gt/left/000001.png"), &mask);
     expect_bad(
         &d,
         "gt/hidden/hidden/left/000001.png",

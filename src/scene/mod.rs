@@ -439,31 +439,41 @@ impl Scene {
     /// Every ground-truth label image that exists (visible and hidden structures) has its
     /// camera's size, so that `info` refuses what `classify` and `track` would (headers only).
     fn check_ground_truth_headers(&self) -> Result<(), InputError> {
-        let Some(root) = &self.root else {
-            return Ok(());
-        };
-        let gt = &self.ground_truth;
-        let hidden: Vec<&Structure> = self.structures.iter().filter(|s| !s.visible).collect();
-        for cam in &self.cameras {
-            let size = (cam.width, cam.height);
+        for (c, cam) in self.cameras.iter().enumerate() {
             for t in 0..self.frame_count {
-                let mut paths = Vec::new();
-                if let Some(l) = &gt.labels {
-                    paths.push(root.join(l.expand(t, &cam.name, "")));
-                }
-                if let Some(h) = &gt.hidden {
-                    paths.extend(
-                        hidden
-                            .iter()
-                            .map(|s| root.join(h.expand(t, &cam.name, &s.name))),
-                    );
-                }
-                for path in paths.iter().filter(|p| p.exists()) {
-                    frames::check_image_header(path, size, "ground-truth label image")?;
+                for path in self.ground_truth_files(t, c) {
+                    frames::check_image_header(
+                        &path,
+                        (cam.width, cam.height),
+                        "ground-truth label image",
+                    )?;
                 }
             }
         }
         Ok(())
+    }
+
+    /// The ground-truth images of frame `t` in camera `c` that exist as files: the label image
+    /// and each hidden structure's mask (none for a scene without a folder).
+    fn ground_truth_files(&self, t: usize, c: usize) -> Vec<PathBuf> {
+        let (Some(root), Some(cam)) = (&self.root, self.cameras.get(c)) else {
+            return Vec::new();
+        };
+        let gt = &self.ground_truth;
+        let mut paths = Vec::new();
+        if let Some(l) = &gt.labels {
+            paths.push(root.join(l.expand(t, &cam.name, "")));
+        }
+        if let Some(h) = &gt.hidden {
+            paths.extend(
+                self.structures
+                    .iter()
+                    .filter(|s| !s.visible)
+                    .map(|s| root.join(h.expand(t, &cam.name, &s.name))),
+            );
+        }
+        paths.retain(|p| p.exists());
+        paths
     }
 
     /// Every frame file exists and its header gives its camera's size (cheap).
@@ -502,40 +512,22 @@ impl Scene {
     }
 
     /// Decodes every ground-truth image (label images and hidden structures' masks) as `track`
-    /// will read them: `info` then refuses what `track` would, not after a run. Ground truth
-    /// given in memory was made by the program and is not checked; without files, nothing is
-    /// read and no progress reported.
+    /// will read them: `info` then refuses what `track` would, not after a run. Without files
+    /// (ground truth in memory, or none), nothing is read and no progress reported.
     pub fn decode_ground_truth(&self, progress: &dyn Fn(usize, usize)) -> Result<(), InputError> {
-        let gt = &self.ground_truth;
-        let Some(root) = &self.root else {
-            return Ok(());
-        };
-        let hidden: Vec<&Structure> = self.structures.iter().filter(|s| !s.visible).collect();
-        let labels = gt.labels.as_ref().filter(|_| gt.memory_labels.is_none());
-        let masks = gt.hidden.as_ref().filter(|_| !hidden.is_empty());
-        if labels.is_none() && masks.is_none() {
-            return Ok(());
-        }
         for t in 0..self.frame_count {
-            for (c, cam) in self.cameras.iter().enumerate() {
-                let mut paths = Vec::new();
-                if let Some(l) = labels {
-                    paths.push(root.join(l.expand(t, &cam.name, "")));
-                }
-                if let Some(h) = masks {
-                    paths.extend(
-                        hidden
-                            .iter()
-                            .map(|s| root.join(h.expand(t, &cam.name, &s.name))),
-                    );
-                }
-                for path in paths.iter().filter(|p| p.exists()) {
-                    labels::read_label_png_sized(path, |w, h| {
-                        self.check_label_size(path, w, h, c)
+            let mut any = false;
+            for c in 0..self.cameras.len() {
+                for path in self.ground_truth_files(t, c) {
+                    labels::read_label_png_sized(&path, |w, h| {
+                        self.check_label_size(&path, w, h, c)
                     })?;
+                    any = true;
                 }
             }
-            progress(t + 1, self.frame_count);
+            if any {
+                progress(t + 1, self.frame_count);
+            }
         }
         Ok(())
     }
