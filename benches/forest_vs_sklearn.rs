@@ -8,6 +8,12 @@
 //! tests on every pixel of frames 5 and 9 in both views against ground truth. The Python half
 //! (`benches/sklearn_forest.py`) pip-installs scikit-learn if it is missing. Not part of CI.
 //!
+//! Inference takes the masks (`appearance::forest::masks`) where the CPU has AVX-512, else the
+//! lockstep walk; `ENDOFUSE_FOREST_WALK=1` forces the walk. `FOREST_SHUFFLE=1` puts the test
+//! pixels in random order (neighbours no longer share paths); `FOREST_LABEL_NOISE=0.05` draws
+//! that share of the training labels at random (large, deep trees, as hard tissue grows);
+//! `FOREST_PROFILE=1` adds one-thread timings of forests of 1, 5 and 20 trees.
+//!
 //! Accuracy is also compared over `FOREST_SEEDS` (5 unless given) forests per side, one per
 //! random seed: a single forest's accuracy moves with its seed by about as much as the two
 //! forests differ, so one pair of forests cannot say which is ahead.
@@ -42,6 +48,20 @@ fn main() {
     let started = Instant::now();
     let train = collect_samples(&scene, &classes, None).unwrap();
     let extract_train_s = started.elapsed().as_secs_f64();
+    // FOREST_LABEL_NOISE=0.1: that share of the training labels drawn at random, for the large,
+    // deep trees that hard (real) tissue grows.
+    let mut train = train;
+    if let Some(share) = std::env::var("FOREST_LABEL_NOISE")
+        .ok()
+        .and_then(|v| v.parse::<f64>().ok())
+    {
+        let mut rng = endofuse::rng::Rng::new(12);
+        for c in train.classes.iter_mut() {
+            if rng.uniform() < share {
+                *c = rng.below(classes.len()) as u8;
+            }
+        }
+    }
     let mut test = Samples::default();
     let mut extract_ms = Vec::new();
     for t in [5usize, 9] {
@@ -55,6 +75,16 @@ fn main() {
             for (f, &l) in all.into_iter().zip(&gt.data) {
                 test.push(f, classes.class_of_label(l).unwrap_or(0) as u8);
             }
+        }
+    }
+    // FOREST_SHUFFLE=1: test pixels in a random order, not image order (neighbours no longer
+    // share their paths through the trees, as in sparse classification).
+    if std::env::var_os("FOREST_SHUFFLE").is_some() {
+        let mut rng = endofuse::rng::Rng::new(11);
+        for i in (1..test.len()).rev() {
+            let j = rng.below(i + 1);
+            test.features.swap(i, j);
+            test.classes.swap(i, j);
         }
     }
     let flat = |s: &Samples| {
