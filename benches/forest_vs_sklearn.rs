@@ -8,8 +8,9 @@
 //! tests on every pixel of frames 5 and 9 in both views against ground truth. The Python half
 //! (`benches/sklearn_forest.py`) pip-installs scikit-learn if it is missing. Not part of CI.
 //!
-//! Inference takes the masks (`appearance::forest::masks`) where the CPU has AVX-512, else the
-//! lockstep walk; `ENDOFUSE_FOREST_WALK=1` forces the walk. `FOREST_SHUFFLE=1` puts the test
+//! Inference takes the masks (`appearance::forest::masks`) where the CPU has AVX-512BW or AVX2,
+//! else the lockstep walk; `ENDOFUSE_FOREST_WALK=1` forces the walk, `ENDOFUSE_FOREST_AVX2=1`
+//! the AVX2 masks. `FOREST_SHUFFLE=1` puts the test
 //! pixels in random order (neighbours no longer share paths); `FOREST_LABEL_NOISE=0.05` draws
 //! that share of the training labels at random (large, deep trees, as hard tissue grows);
 //! `FOREST_PROFILE=1` adds one-thread timings of forests of 1, 5 and 20 trees.

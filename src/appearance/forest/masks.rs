@@ -1,13 +1,12 @@
-//! Leaves of 64 pixels at once, by masks (AVX-512BW): every split of a tree compares one
-//! feature of all 64 pixels with its threshold in one instruction, and a 64-bit mask per node
-//! says which pixels reach it (the root: all; a split's children: its mask less or with the
-//! pixels going right). Every node is visited once a block, whichever pixels reach it, in index
-//! order (children come after their parents), so there is no branch on the data and no chain
-//! of dependent loads: what a walk pays per level, this pays per node and shares among 64
-//! pixels. It wins while a block's pixels share most of their paths (neighbours in an image,
-//! trees of a few hundred nodes); when they part ways a block gives the masks up after a budget
-//! of splits and is walked (`Tree::walk_block`, the reference: both end every pixel on the same
-//! leaf).
+//! Leaves of 64 pixels at once, by masks (AVX-512BW, or AVX2): a 64-bit mask per node says
+//! which of a block's pixels reach it (the root: all of them), and a split makes its children's
+//! masks by comparing one feature of all 64 pixels with its threshold in one instruction (two
+//! with AVX2). Splits are visited depth first and a subtree no pixel reaches is skipped whole,
+//! so a block pays once per split its pixels reach, with no chain of dependent loads, where a
+//! walk pays per pixel per level; leaves reached are listed without a branch. It wins while a
+//! block's pixels share most of their paths (neighbours in an image, trees of a few hundred
+//! nodes): when they part ways a block gives the masks up after a budget of splits and is walked
+//! (`Tree::walk_block`, the reference: both end every pixel on the same leaf).
 
 use super::{INTERNAL, Tree};
 use crate::appearance::features::{FEATURE_COUNT, FeatureVector};
@@ -196,17 +195,34 @@ impl MaskTree {
     }
 }
 
-/// Can this CPU take the masks? (The standard library asks the CPU once.) The environment
-/// variable `ENDOFUSE_FOREST_WALK` turns them off, for benchmarks side by side.
-pub(super) fn available() -> bool {
+/// Which vector instructions the masks use: AVX-512BW compares 64 bytes into a mask at once,
+/// AVX2 two halves of 32.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Isa {
+    Avx512,
+    Avx2,
+}
+
+/// Can this CPU take the masks, and with which instructions? (The standard library asks the
+/// CPU once.) The environment variable `ENDOFUSE_FOREST_WALK` turns the masks off and
+/// `ENDOFUSE_FOREST_AVX2` keeps them to AVX2, for benchmarks side by side.
+pub(super) fn available() -> Option<Isa> {
     #[cfg(target_arch = "x86_64")]
     {
-        std::env::var_os("ENDOFUSE_FOREST_WALK").is_none()
+        if std::env::var_os("ENDOFUSE_FOREST_WALK").is_some() {
+            return None;
+        }
+        if std::env::var_os("ENDOFUSE_FOREST_AVX2").is_none()
             && std::arch::is_x86_feature_detected!("avx512f")
             && std::arch::is_x86_feature_detected!("avx512bw")
+        {
+            return Some(Isa::Avx512);
+        }
+        if std::arch::is_x86_feature_detected!("avx2") {
+            return Some(Isa::Avx2);
+        }
     }
-    #[cfg(not(target_arch = "x86_64"))]
-    false
+    None
 }
 
 /// Calls `at_leaf(lane, leaf node)` for each of the block's pixels (`valid`: which lanes hold
@@ -216,24 +232,92 @@ pub(super) fn available() -> bool {
 /// count + 2.
 ///
 /// # Safety
-/// The CPU has AVX-512F and AVX-512BW; `tree` lays out a checked tree (children after their
-/// parents, inside the node count; features below FEATURE_COUNT); the scratch is large enough.
+/// The CPU has `isa` (as [`available`] found); `tree` lays out a checked tree (children after
+/// their parents, inside the node count; features below FEATURE_COUNT); the scratch is large
+/// enough.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512bw")]
-#[inline]
+#[inline(always)]
 pub(super) unsafe fn leaves(
+    isa: Isa,
     tree: &MaskTree,
     rows: &Rows,
     valid: u64,
     reach: &mut [u64],
     hit: &mut [u32],
+    at_leaf: impl FnMut(usize, u32),
+) -> bool {
+    // SAFETY: the caller's contract.
+    unsafe {
+        match isa {
+            Isa::Avx512 => leaves_avx512(tree, rows, valid, reach, hit, at_leaf),
+            Isa::Avx2 => leaves_avx2(tree, rows, valid, reach, hit, at_leaf),
+        }
+    }
+}
+
+/// [`leaves`] with AVX-512BW: one compare of 64 bytes into a mask.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512bw")]
+unsafe fn leaves_avx512(
+    tree: &MaskTree,
+    rows: &Rows,
+    valid: u64,
+    reach: &mut [u64],
+    hit: &mut [u32],
+    at_leaf: impl FnMut(usize, u32),
+) -> bool {
+    // SAFETY: the caller's contract; a row is 64 bytes aligned to 64.
+    unsafe {
+        leaves_by(tree, valid, reach, hit, at_leaf, |feature, threshold| {
+            let row = _mm512_load_si512(rows.0.as_ptr().add(feature) as *const _);
+            _mm512_cmpgt_epu8_mask(row, _mm512_set1_epi8(threshold as i8))
+        })
+    }
+}
+
+/// [`leaves`] with AVX2: a byte is above the threshold where their saturated difference is
+/// not zero, found for 32 bytes at a time.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn leaves_avx2(
+    tree: &MaskTree,
+    rows: &Rows,
+    valid: u64,
+    reach: &mut [u64],
+    hit: &mut [u32],
+    at_leaf: impl FnMut(usize, u32),
+) -> bool {
+    // SAFETY: the caller's contract; a row is 64 bytes aligned to 64.
+    unsafe {
+        leaves_by(tree, valid, reach, hit, at_leaf, |feature, threshold| {
+            let row = rows.0.as_ptr().add(feature) as *const __m256i;
+            let t = _mm256_set1_epi8(threshold as i8);
+            let zero = _mm256_setzero_si256();
+            let at_most = |half: *const __m256i| {
+                let d = _mm256_subs_epu8(_mm256_load_si256(half), t);
+                _mm256_movemask_epi8(_mm256_cmpeq_epi8(d, zero)) as u32 as u64
+            };
+            !(at_most(row) | at_most(row.add(1)) << 32)
+        })
+    }
+}
+
+/// The masks' walk of one tree over one block, `right(feature, threshold)` giving the mask of
+/// the block's pixels whose feature is above the threshold.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn leaves_by(
+    tree: &MaskTree,
+    valid: u64,
+    reach: &mut [u64],
+    hit: &mut [u32],
     mut at_leaf: impl FnMut(usize, u32),
+    right: impl Fn(usize, u8) -> u64,
 ) -> bool {
     debug_assert!(reach.len() >= tree.nodes && hit.len() >= tree.leaves + 2);
     let mut hits = 0usize;
     if tree.splits.is_empty() {
         // The root is the tree's only leaf.
-        reach[0] = valid;
         hit[0] = 0;
         hits = 1;
     }
@@ -257,8 +341,7 @@ pub(super) unsafe fn leaves(
                 return false;
             }
             budget -= 1;
-            let row = _mm512_load_si512(rows.0.as_ptr().add(s.feature as usize) as *const _);
-            let right = _mm512_cmpgt_epu8_mask(row, _mm512_set1_epi8(s.threshold as i8));
+            let right = right(s.feature as usize, s.threshold);
             let (left, right) = (r & !right, r & right);
             *reach.add(s.child as usize) = left;
             *reach.add(s.child as usize + 1) = right;
@@ -287,11 +370,8 @@ mod tests {
     use super::*;
     use crate::rng::Rng;
 
-    /// Every pixel's leaf by masks (`None` where this CPU cannot take them).
-    fn by_masks(tree: &Tree, fs: &[FeatureVector]) -> Option<Vec<u32>> {
-        if !available() {
-            return None;
-        }
+    /// Every pixel's leaf by masks with `isa` (which this CPU must have), blocks given up walked.
+    fn by_masks(tree: &Tree, fs: &[FeatureVector], isa: Isa) -> Vec<u32> {
         let layout = MaskTree::new(tree);
         let mut reach = vec![0u64; layout.nodes()];
         let mut hit = vec![0u32; layout.leaves() + 2];
@@ -305,9 +385,9 @@ mod tests {
                 (1u64 << chunk.len()) - 1
             };
             #[cfg(target_arch = "x86_64")]
-            // SAFETY: `available()` found AVX-512F/BW; the tree is checked; scratch sized.
+            // SAFETY: `available()` found the ISA; the tree is checked; scratch sized.
             let done = unsafe {
-                leaves(&layout, &rows, valid, &mut reach, &mut hit, |p, l| {
+                leaves(isa, &layout, &rows, valid, &mut reach, &mut hit, |p, l| {
                     leaf[p] = l
                 })
             };
@@ -318,7 +398,7 @@ mod tests {
             }
             out.extend_from_slice(&leaf[..chunk.len()]);
         }
-        Some(out)
+        out
     }
 
     /// The masks, the lockstep walk and one pixel's walk agree on every pixel's leaf.
@@ -328,8 +408,15 @@ mod tests {
         let mut walked = vec![u32::MAX; fs.len()];
         tree.walk_block(fs, |j, node| walked[j] = node);
         assert_eq!(walked, one, "{what}: lockstep walk");
-        if let Some(masked) = by_masks(tree, fs) {
-            assert_eq!(masked, one, "{what}: masks");
+        // Both instruction sets this CPU has.
+        let isas = match available() {
+            Some(Isa::Avx512) => vec![Isa::Avx512, Isa::Avx2],
+            Some(Isa::Avx2) => vec![Isa::Avx2],
+            None => vec![],
+        };
+        for isa in isas {
+            let masked = by_masks(tree, fs, isa);
+            assert_eq!(masked, one, "{what}: masks ({isa:?})");
         }
     }
 
@@ -403,8 +490,8 @@ mod tests {
 
     #[test]
     fn masks_lockstep_walk_and_one_pixel_walk_reach_the_same_leaves() {
-        if !available() {
-            eprintln!("this CPU has no AVX-512BW: only the two walks are compared");
+        if available().is_none() {
+            eprintln!("this CPU has no AVX2: only the two walks are compared");
         }
         for (samples, seed) in [(40, 1), (3000, 2), (20_000, 3)] {
             let tree = trained_tree(samples, seed);

@@ -4,8 +4,8 @@
 //! (strokes are unbalanced), bootstrap with out-of-bag error, and inference that walks the trees
 //! tree-major over blocks of pixels so each tree stays in cache, 8 walks in lockstep, each
 //! ending on its leaf's probabilities stored by node and padded to 4 (one vector add) — or,
-//! where the CPU has AVX-512 and neighbouring pixels share their paths, 64 pixels at once by
-//! masks (`masks`).
+//! where the CPU has AVX2 or AVX-512 and neighbouring pixels share their paths, 64 pixels at
+//! once by masks (`masks`).
 
 mod masks;
 mod train;
@@ -140,6 +140,8 @@ pub struct Forest {
     /// `trees`, not serialised.
     #[serde(skip)]
     masks: Vec<Option<masks::MaskTree>>,
+    #[serde(skip)]
+    masks_isa: Option<masks::Isa>,
 }
 
 /// The serialised form of a [`Forest`], before its trees are checked.
@@ -207,10 +209,10 @@ impl Forest {
                 table
             })
             .collect();
-        let by_masks = masks::available();
+        let masks_isa = masks::available();
         let masks = trees
             .iter()
-            .map(|t| by_masks.then(|| masks::MaskTree::new(t)))
+            .map(|t| masks_isa.map(|_| masks::MaskTree::new(t)))
             .collect();
         Forest {
             trees,
@@ -218,6 +220,7 @@ impl Forest {
             params,
             by_node,
             masks,
+            masks_isa,
         }
     }
 
@@ -370,7 +373,7 @@ impl Forest {
         mut at_leaf: impl FnMut(usize, u32),
     ) {
         #[cfg(target_arch = "x86_64")]
-        if let (Some(tree), Some(s)) = (&self.masks[t], state) {
+        if let (Some(tree), Some(s), Some(isa)) = (&self.masks[t], state, self.masks_isa) {
             if s.walk_for[t] > 0 {
                 s.walk_for[t] -= 1;
             } else {
@@ -393,12 +396,11 @@ impl Forest {
                     } else {
                         (1u64 << n) - 1
                     };
-                    // SAFETY: `masks` holds layouts only where `masks::available()` found
-                    // AVX-512F/BW; each lays out a checked tree; the scratch is sized for the
-                    // largest.
+                    // SAFETY: `masks` holds layouts only where `masks::available()` found the
+                    // ISA; each lays out a checked tree; the scratch is sized for the largest.
                     let done = unsafe {
-                        masks::leaves(tree, rows, valid, &mut s.reach, &mut s.hit, |p, leaf| {
-                            at_leaf(base + p, leaf)
+                        masks::leaves(isa, tree, rows, valid, &mut s.reach, &mut s.hit, |p, l| {
+                            at_leaf(base + p, l)
                         })
                     };
                     if !done {
