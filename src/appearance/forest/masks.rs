@@ -164,7 +164,12 @@ impl MaskTree {
             });
             stack.extend([(i, true), (n.child + 1, false), (n.child, false)]);
         }
-        let leaves = tree.leaf_of.iter().filter(|&&at| at != INTERNAL).count();
+        // Leaves the splits can list (each leaf child once; the root when it is the only
+        // node): the bound on a block's hits whatever the layout.
+        let leaves = (splits.iter())
+            .map(|s| s.leaf_children.count_ones() as usize)
+            .sum::<usize>()
+            .max(1);
         // Each node's level (children come after their parents), for the leaves' mean depth.
         let mut level = vec![0u32; tree.nodes.len()];
         let mut depth_sum = 0u64;

@@ -173,6 +173,8 @@ pub enum TreeError {
     Leaf { node: usize },
     #[error("a path is longer than the tree's depth")]
     Depth,
+    #[error("node {node} is a child of two splits")]
+    Shared { node: usize },
 }
 
 impl TryFrom<ForestData> for Forest {
@@ -325,20 +327,8 @@ impl Forest {
 
     /// This thread's state for the masks, sized for this forest and readied for a new block.
     fn mask_state<'a>(&self, state: &'a mut Option<MaskState>) -> &'a mut MaskState {
-        let nodes = self
-            .masks
-            .iter()
-            .flatten()
-            .map(|m| m.nodes())
-            .max()
-            .unwrap_or(0);
-        let leaves = self
-            .masks
-            .iter()
-            .flatten()
-            .map(|m| m.leaves())
-            .max()
-            .unwrap_or(0);
+        let (nodes, leaves) = (self.masks.iter().flatten())
+            .fold((0, 0), |(n, l), m| (n.max(m.nodes()), l.max(m.leaves())));
         let s = state.get_or_insert_with(|| MaskState {
             rows: (0..BLOCK / masks::LANES)
                 .map(|_| masks::Rows::new())
@@ -531,6 +521,9 @@ impl Tree {
         }
         // The longest path from the root to each node (children come after their parents).
         let mut level = vec![0u32; n];
+        // A node reached from two splits makes a graph, not a tree: the masks (`masks`) lay a
+        // tree out as paths from the root and would visit such a node once per path.
+        let mut has_parent = vec![false; n];
         for (i, node) in self.nodes.iter().enumerate() {
             if node.feature as usize >= FEATURE_COUNT {
                 return Err(TreeError::Split { node: i });
@@ -542,6 +535,9 @@ impl Tree {
                         return Err(TreeError::Split { node: i });
                     }
                     for c in [child, child + 1] {
+                        if std::mem::replace(&mut has_parent[c], true) {
+                            return Err(TreeError::Shared { node: c });
+                        }
                         level[c] = level[c].max(level[i] + 1);
                     }
                 }
@@ -777,6 +773,27 @@ mod tests {
         v["trees"][0]["depth"] = 0.into();
         let err = serde_json::from_value::<Forest>(v).unwrap_err().to_string();
         assert!(err.contains("depth"), "{err}");
+    }
+
+    /// Splits sharing children (a graph, not a tree: 0 → 1, 2; 1 and 2 → 3, 4; 3 and 4 →
+    /// 5, 6) are refused, though every path is short and goes forward.
+    #[test]
+    fn a_graph_whose_splits_share_children_is_refused() {
+        let tree = Tree {
+            nodes: vec![
+                Node::split(0, 100, 1),
+                Node::split(1, 100, 3),
+                Node::split(2, 100, 3),
+                Node::split(3, 100, 5),
+                Node::split(4, 100, 5),
+                Node::leaf(5),
+                Node::leaf(6),
+            ],
+            leaf_of: vec![INTERNAL, INTERNAL, INTERNAL, INTERNAL, INTERNAL, 0, 2],
+            leaves: vec![1.0, 0.0, 0.0, 1.0],
+            depth: 3,
+        };
+        assert_eq!(tree.check(2), Err(TreeError::Shared { node: 3 }));
     }
 
     /// The index of tree 0's first leaf in a serialised forest.
