@@ -394,6 +394,8 @@ impl Forest {
                         })
                     };
                     if !done {
+                        #[cfg(test)]
+                        GAVE_UP.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                         // The pixels part ways in this tree: walk the rest of the block, and
                         // the next blocks before trying the masks again.
                         self.trees[t].walk_block(&fs[base..], |j, leaf| at_leaf(base + j, leaf));
@@ -405,6 +407,12 @@ impl Forest {
             }
         }
         self.trees[t].walk_block(fs, at_leaf)
+    }
+
+    /// The most nodes in one tree.
+    #[cfg(test)]
+    fn nodes_max(&self) -> usize {
+        self.trees.iter().map(|t| t.nodes.len()).max().unwrap_or(0)
     }
 
     /// Longest path of each tree.
@@ -423,6 +431,10 @@ thread_local! {
     /// pixels at a time).
     static MASK_STATE: std::cell::RefCell<Option<MaskState>> = const { std::cell::RefCell::new(None) };
 }
+
+/// Blocks of 64 pixels the masks gave up, counted for the tests.
+#[cfg(test)]
+static GAVE_UP: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
 
 /// Blocks a tree is walked after its pixels part ways too much for the masks (a block walked
 /// costs less than one block of masks given up).
@@ -694,6 +706,51 @@ mod tests {
                 forest.predict(f, &mut one);
                 assert_eq!(&one[..], &many[j * 3..(j + 1) * 3], "{name} pixel {j}");
             }
+        }
+    }
+
+    /// On one fresh thread (its own mask state): a small forest, then a large one (the state
+    /// grows), on 64 alike pixels then 192 random ones, so a block's masks succeed on its first
+    /// 64 pixels and give up on the next (the walk starts mid-block). Every pixel's
+    /// probabilities are still the one-pixel walk's.
+    #[test]
+    fn masks_give_up_mid_block_and_grow_their_state_between_forests() {
+        let train = |noise_every: usize, seed: u64| {
+            let mut s = toy(20_000, seed);
+            let mut rng = Rng::new(seed + 1);
+            for c in s.classes.iter_mut() {
+                if rng.below(noise_every) == 0 {
+                    *c = rng.below(3) as u8;
+                }
+            }
+            let params = ForestParams {
+                trees: 3,
+                ..ForestParams::default()
+            };
+            Forest::train(&s, 3, &params).unwrap().0
+        };
+        let (small, large) = (train(1_000_000, 31), train(3, 32));
+        assert!(small.nodes_max() < large.nodes_max());
+        let mut fs = vec![[128u8; FEATURE_COUNT]; 64];
+        fs.extend(toy(192, 33).features);
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap();
+        let gave_up = GAVE_UP.load(std::sync::atomic::Ordering::Relaxed);
+        for forest in [&small, &large] {
+            let many = pool.install(|| forest.predict_many(&fs));
+            let mut one = vec![0f32; 3];
+            for (j, f) in fs.iter().enumerate() {
+                forest.predict(f, &mut one);
+                assert_eq!(&one[..], &many[j * 3..(j + 1) * 3], "pixel {j}");
+            }
+        }
+        if masks::available().is_some() {
+            assert!(
+                GAVE_UP.load(std::sync::atomic::Ordering::Relaxed) > gave_up,
+                "the large forest's random pixels should make the masks give up"
+            );
         }
     }
 
