@@ -136,10 +136,10 @@ pub struct Forest {
     /// that ends on node `i` adds its group(s) with no second lookup and no loop over classes.
     #[serde(skip)]
     by_node: Vec<Vec<[f32; 4]>>,
-    /// Per tree, its layout for the masks (`masks`) where this CPU takes them: derived from
-    /// `trees`, not serialised.
+    /// Per tree, its layout for the masks (`masks`), where this CPU takes them (`masks_isa`;
+    /// empty otherwise): derived from `trees`, not serialised.
     #[serde(skip)]
-    masks: Vec<Option<masks::MaskTree>>,
+    masks: Vec<masks::MaskTree>,
     #[serde(skip)]
     masks_isa: Option<masks::Isa>,
 }
@@ -212,10 +212,10 @@ impl Forest {
             })
             .collect();
         let masks_isa = masks::available();
-        let masks = trees
-            .iter()
-            .map(|t| masks_isa.map(|_| masks::MaskTree::new(t)))
-            .collect();
+        let masks = match masks_isa {
+            Some(_) => trees.iter().map(masks::MaskTree::new).collect(),
+            None => Vec::new(),
+        };
         Forest {
             trees,
             classes,
@@ -262,7 +262,7 @@ impl Forest {
                     2 => self.sum_block::<2>(fs, o, inv, state),
                     _ => self.sum_block_any(fs, o, inv, state),
                 };
-                if self.masks.iter().any(Option::is_some) {
+                if self.masks_isa.is_some() {
                     MASK_STATE.with_borrow_mut(|state| sum(Some(self.mask_state(state))))
                 } else {
                     sum(None)
@@ -327,8 +327,8 @@ impl Forest {
 
     /// This thread's state for the masks, sized for this forest and readied for a new block.
     fn mask_state<'a>(&self, state: &'a mut Option<MaskState>) -> &'a mut MaskState {
-        let (nodes, leaves) = (self.masks.iter().flatten())
-            .fold((0, 0), |(n, l), m| (n.max(m.nodes()), l.max(m.leaves())));
+        let (nodes, leaves) =
+            (self.masks.iter()).fold((0, 0), |(n, l), m| (n.max(m.nodes()), l.max(m.leaves())));
         let s = state.get_or_insert_with(|| MaskState {
             rows: (0..BLOCK / masks::LANES)
                 .map(|_| masks::Rows::new())
@@ -363,7 +363,8 @@ impl Forest {
         mut at_leaf: impl FnMut(usize, u32),
     ) {
         #[cfg(target_arch = "x86_64")]
-        if let (Some(tree), Some(s), Some(isa)) = (&self.masks[t], state, self.masks_isa) {
+        if let (Some(isa), Some(s)) = (self.masks_isa, state) {
+            let tree = &self.masks[t];
             if s.walk_for[t] > 0 {
                 s.walk_for[t] -= 1;
             } else {
