@@ -137,11 +137,12 @@ impl MaskTree {
     pub(super) fn new(tree: &Tree) -> MaskTree {
         let is_leaf = |i: u32| tree.leaf_of[i as usize] != INTERNAL;
         let mut splits: Vec<Split> = Vec::new();
-        // Depth first without recursion (a deserialised tree may be deep): `true` closes a
-        // split's subtree, setting its skip.
-        let mut stack = vec![(0u32, false)];
+        // Depth first without recursion (a deserialised tree may be deep), each node with its
+        // level: `true` closes a split's subtree, setting its skip.
+        let mut stack = vec![(0u32, 0u32, false)];
         let mut open = Vec::new();
-        while let Some((i, close)) = stack.pop() {
+        let mut depth_sum = 0u64;
+        while let Some((i, level, close)) = stack.pop() {
             if close {
                 let after = splits.len() as u32;
                 if let Some(s) = open.pop().and_then(|at: usize| splits.get_mut(at)) {
@@ -150,6 +151,7 @@ impl MaskTree {
                 continue;
             }
             if is_leaf(i) {
+                depth_sum += level as u64;
                 continue;
             }
             let n = tree.nodes[i as usize];
@@ -162,7 +164,11 @@ impl MaskTree {
                 threshold: n.threshold,
                 leaf_children: is_leaf(n.child) as u8 | (is_leaf(n.child + 1) as u8) << 1,
             });
-            stack.extend([(i, true), (n.child + 1, false), (n.child, false)]);
+            stack.extend([
+                (i, level, true),
+                (n.child + 1, level + 1, false),
+                (n.child, level + 1, false),
+            ]);
         }
         // Leaves the splits can list (each leaf child once; the root when it is the only
         // node): the bound on a block's hits whatever the layout.
@@ -170,19 +176,7 @@ impl MaskTree {
             .map(|s| s.leaf_children.count_ones() as usize)
             .sum::<usize>()
             .max(1);
-        // Each node's level (children come after their parents), for the leaves' mean depth.
-        let mut level = vec![0u32; tree.nodes.len()];
-        let mut depth_sum = 0u64;
-        for (i, (n, &at)) in tree.nodes.iter().zip(&tree.leaf_of).enumerate() {
-            if at == INTERNAL {
-                for c in [n.child, n.child + 1] {
-                    level[c as usize] = level[i] + 1;
-                }
-            } else {
-                depth_sum += level[i] as u64;
-            }
-        }
-        let mean_depth = depth_sum as f64 / leaves.max(1) as f64;
+        let mean_depth = depth_sum as f64 / leaves as f64;
         MaskTree {
             splits,
             nodes: tree.nodes.len(),
