@@ -309,6 +309,44 @@ mod tests {
         }
     }
 
+    /// A query of part of a region (computed densely over its box widened by the features'
+    /// reach) equals the per-pixel query: discs in the middle, against a region's edge inside
+    /// the frame, and at the frame's corner.
+    #[test]
+    fn a_query_of_part_of_a_region_computed_densely_equals_its_per_pixel_query() {
+        let mut rng = Rng::new(19);
+        let img = RgbImage::from_fn(220, 160, |_, _| {
+            image::Rgb([
+                rng.below(256) as u8,
+                rng.below(256) as u8,
+                rng.below(256) as u8,
+            ])
+        });
+        let (x0, y0, w, h) = (12usize, 8usize, 190usize, 140usize);
+        let ff = FrameFeatures::region(&img, 1, x0, y0, w, h);
+        for (cx, cy) in [(110.0, 80.0), (20.0, 60.0), (60.0, 12.0)] {
+            let list: Vec<(u32, u32)> = (y0..y0 + h)
+                .flat_map(|y| (x0..x0 + w).map(move |x| (x, y)))
+                .filter(|&(x, y)| (x as f64 - cx).hypot(y as f64 - cy) < 52.0)
+                .map(|(x, y)| (x as u32, y as u32))
+                .collect();
+            // Enough pixels, and a third of their widened box, for the dense path.
+            assert!(list.len() >= 4096, "{} pixels", list.len());
+            assert!(
+                ff.pixels_auto(&list) == ff.pixels(&list),
+                "disc at ({cx},{cy})"
+            );
+        }
+        let ff = FrameFeatures::region(&img, 1, 0, 0, 150, 120);
+        let corner: Vec<(u32, u32)> = (0..70u32)
+            .flat_map(|y| (0..70u32).map(move |x| (x, y)))
+            .collect();
+        assert!(
+            ff.pixels_auto(&corner) == ff.pixels(&corner),
+            "corner square"
+        );
+    }
+
     /// A region's many-pixel query (computed densely) equals its per-pixel query, on a region
     /// cut from the middle of a frame and one touching its corner, at two levels.
     #[test]

@@ -11,6 +11,8 @@ mod lab_avx2;
 #[cfg(target_arch = "x86_64")]
 mod pixel_avx2;
 pub mod smooth;
+#[cfg(target_arch = "x86_64")]
+mod tables_avx2;
 pub mod validate;
 
 pub use features::{FEATURE_COUNT, FrameFeatures};

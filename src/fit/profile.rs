@@ -41,9 +41,20 @@ pub enum Phase {
     StereoImages,
     /// Inside stereo matching: the epipolar searches of every point.
     StereoSearch,
+    /// After the fit, outside its per-frame time: the frame's output masks (the three below).
+    Outputs,
+    /// Inside the outputs: the full-resolution label and hidden-structure rasters.
+    OutputRasters,
+    /// Inside the outputs: the hidden structures' region masks.
+    RegionMasks,
+    /// Inside the outputs: the occluder check of the label masks (features and forest).
+    Occluders,
+    /// After the outputs: what the caller does with the frame (`track` writes its PNGs and
+    /// scores them against ground truth).
+    Record,
 }
 
-const PHASES: [(Phase, &str); 16] = [
+const PHASES: [(Phase, &str); 21] = [
     (Phase::Frame, "whole frame"),
     (Phase::Pyramid, "pyramids"),
     (Phase::Lines, "lines in all"),
@@ -60,6 +71,11 @@ const PHASES: [(Phase, &str); 16] = [
     (Phase::Objective, "objective"),
     (Phase::StereoImages, "stereo images"),
     (Phase::StereoSearch, "stereo search"),
+    (Phase::Outputs, "after the fit: output masks"),
+    (Phase::OutputRasters, "mask rasters"),
+    (Phase::RegionMasks, "region masks"),
+    (Phase::Occluders, "occluder check"),
+    (Phase::Record, "recording the frame"),
 ];
 
 static NANOS: [AtomicU64; PHASES.len()] = [const { AtomicU64::new(0) }; PHASES.len()];
@@ -67,9 +83,13 @@ static NANOS: [AtomicU64; PHASES.len()] = [const { AtomicU64::new(0) }; PHASES.l
 static FRAMES: AtomicU64 = AtomicU64::new(0);
 
 pub fn enabled() -> bool {
+    requested() && !PAUSED.load(Ordering::Relaxed)
+}
+
+/// Was profiling asked for (`ENDOFUSE_PROFILE` set)?
+fn requested() -> bool {
     static ON: OnceLock<bool> = OnceLock::new();
     *ON.get_or_init(|| std::env::var_os("ENDOFUSE_PROFILE").is_some())
-        && !PAUSED.load(Ordering::Relaxed)
 }
 
 /// Set while work outside the per-frame fit (the output masks) runs: not counted.
@@ -80,6 +100,17 @@ pub fn uncounted<T>(f: impl FnOnce() -> T) -> T {
     PAUSED.store(true, Ordering::Relaxed);
     let r = f();
     PAUSED.store(false, Ordering::Relaxed);
+    r
+}
+
+/// Runs `f` outside the fit's per-frame time (no phase inside it counts), adding its time to
+/// `phase` when profiling is on and `counted` (a tracked frame, not the first).
+pub fn outside<T>(phase: Phase, counted: bool, f: impl FnOnce() -> T) -> T {
+    let started = Instant::now();
+    let r = uncounted(f);
+    if counted && requested() {
+        add(phase, started.elapsed());
+    }
     r
 }
 

@@ -22,6 +22,7 @@ use crate::plane::{LabelImage, Mask};
 use crate::render::raster::{RasterOptions, rasterize};
 use crate::scene::Scene;
 use glam::DVec3;
+use rayon::prelude::*;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
@@ -145,25 +146,40 @@ fn mask_occluders(
     level: usize,
     tracking: &TrackingConfig,
 ) {
-    let margin = tracking.occluder_margin_px;
     if view.level_count() <= level {
         return;
     }
-    // Depth of each labelled pixel inside the labels (only the labels' box is transformed).
-    let inside = crate::render::distance::squared_depth_inside(&labels.map(|&l| l != 0));
+    // Label pixels this deep inside the labels are checked (a row-window test, equal to a
+    // threshold of the depth transform).
+    let checked =
+        crate::render::distance::deep_inside(&labels.map(|&l| l != 0), tracking.occluder_margin_px);
     let (lw, lh) = view.size(level);
     let scale = 1usize << level;
-    let coarse = |i: usize| -> u32 {
+    let coarse = |i: usize| -> usize {
         let (x, y) = ((i % labels.width) / scale, (i / labels.width) / scale);
-        (y.min(lh - 1) * lw + x.min(lw - 1)) as u32
+        y.min(lh - 1) * lw + x.min(lw - 1)
     };
-    let candidates: Vec<usize> = (0..labels.data.len())
-        .filter(|&i| labels.data[i] != 0 && inside.data[i] >= margin * margin)
+    let checked_pixels = || {
+        checked
+            .data
+            .iter()
+            .enumerate()
+            .filter_map(|(i, &c)| c.then_some(i))
+    };
+    // The level's pixels under them, each once and in order (at level 1 a level pixel lies
+    // under four label pixels): a mark per level pixel, not a sort of every label pixel's.
+    let mut wanted = vec![false; lw * lh];
+    for i in checked_pixels() {
+        wanted[coarse(i)] = true;
+    }
+    let pixels: Vec<u32> = wanted
+        .iter()
+        .enumerate()
+        .filter_map(|(i, &w)| w.then_some(i as u32))
         .collect();
-    let pixels: Vec<u32> = candidates.iter().map(|&i| coarse(i)).collect();
     view.ensure(Some(appearance), level, &pixels);
-    for (&i, &c) in candidates.iter().zip(&pixels) {
-        if view.get(level, c, 0) > tracking.occluder_background {
+    for i in checked_pixels() {
+        if view.get(level, coarse(i) as u32, 0) > tracking.occluder_background {
             labels.data[i] = 0;
         }
     }
@@ -655,11 +671,16 @@ pub fn track(
         let elapsed = started.elapsed();
         super::profile::frame_done(t == options.frames.0, elapsed, fit.lines);
         let ms = elapsed.as_secs_f64() * 1e3;
+        // The outputs and what the caller does with them, timed apart from the fit.
+        let counted = t != options.frames.0;
+        let outputs_started = std::time::Instant::now();
         let Rendered {
             mut labels,
             hidden,
             centroids,
-        } = render_state(scene, model, &state);
+        } = super::profile::outside(super::profile::Phase::OutputRasters, counted, || {
+            render_state(scene, model, &state)
+        });
         let hidden_regions = if lost {
             super::hidden_region::widened_when_lost(
                 &tracker.regions,
@@ -670,19 +691,28 @@ pub fn track(
             tracker.regions.clone()
         };
         let hidden_regions = super::hidden_region::with_margins(model, &state, hidden_regions);
-        let region_masks = region_masks(&cameras_of(scene, &state), &hidden, &hidden_regions);
-        for (l, view) in labels.iter_mut().zip(views.iter_mut()) {
-            super::profile::uncounted(|| {
-                mask_occluders(
-                    l,
-                    view,
-                    appearance,
-                    options.fit_level(),
-                    &options.config.tracking,
-                )
+        let region_masks =
+            super::profile::outside(super::profile::Phase::RegionMasks, counted, || {
+                region_masks(&cameras_of(scene, &state), &hidden, &hidden_regions)
             });
+        super::profile::outside(super::profile::Phase::Occluders, counted, || {
+            labels
+                .par_iter_mut()
+                .zip(views.par_iter_mut())
+                .for_each(|(l, view)| {
+                    mask_occluders(
+                        l,
+                        view,
+                        appearance,
+                        options.fit_level(),
+                        &options.config.tracking,
+                    )
+                })
+        });
+        if counted {
+            super::profile::add(super::profile::Phase::Outputs, outputs_started.elapsed());
         }
-        on_frame(TrackedFrame {
+        let frame = TrackedFrame {
             frame: t,
             state,
             energy: fit.energy,
@@ -703,7 +733,8 @@ pub fn track(
             centroids,
             hidden_regions,
             region_masks,
-        })?;
+        };
+        super::profile::outside(super::profile::Phase::Record, counted, || on_frame(frame))?;
     }
     Ok(())
 }

@@ -110,6 +110,72 @@ pub fn squared_depth_inside(region: &Mask) -> DistanceMap {
     squared_edt_in(&region.map(|&v| !v), bounds, 0.0)
 }
 
+/// Margins up to this (px) take [`deep_inside`]'s row windows; wider ones the transform.
+const ROW_WINDOW_MAX_MARGIN_PX: f32 = 16.0;
+
+/// The `true` pixels of `region` whose squared distance to every `false` pixel is at least
+/// `margin²`: exactly those where [`squared_depth_inside`] `>= margin * margin` (f32, as the
+/// callers compare). Only the rows within the margin can hold a nearer `false` pixel, so each
+/// pixel checks those few rows' horizontal distances to their nearest `false` pixel instead of
+/// a transform of the whole frame (the tracker asks this of every output mask, ~500,000 pixels
+/// a view at 960×540). Margins over 16 px take the transform.
+pub fn deep_inside(region: &Mask, margin: f32) -> Mask {
+    let (w, h) = (region.width, region.height);
+    let m2 = margin * margin;
+    if margin.is_nan() || margin > ROW_WINDOW_MAX_MARGIN_PX {
+        // Wide, or NaN (nothing passes a comparison with NaN, as in the transform's case).
+        let depth = squared_depth_inside(region);
+        let data = region.data.iter().zip(&depth.data);
+        return Plane {
+            width: w,
+            height: h,
+            data: data.map(|(&r, &d)| r && d >= m2).collect(),
+        };
+    }
+    let mut out = Plane::filled(w, h, false);
+    let Some([_, y0, _, y1]) = true_bounds(region, 0) else {
+        return out;
+    };
+    // Horizontal distances to the row's nearest `false` pixel, capped where they can no
+    // longer matter (cap² > margin²): rows outside the bounds are all `false` (distance 0).
+    let cap = margin.max(0.0).ceil() as u32 + 1;
+    let rows_below = (0..=cap as usize)
+        .take_while(|&dy| ((dy * dy) as f32) < m2)
+        .count();
+    let (r0, r1) = (y0.saturating_sub(rows_below), (y1 + rows_below).min(h - 1));
+    let mut horizontal = vec![0u32; (r1 + 1 - r0) * w];
+    for (row, dist) in region.data[r0 * w..(r1 + 1) * w]
+        .chunks_exact(w)
+        .zip(horizontal.chunks_exact_mut(w))
+    {
+        let mut run = cap;
+        for (d, &v) in dist.iter_mut().zip(row) {
+            run = if v { (run + 1).min(cap) } else { 0 };
+            *d = run;
+        }
+        run = cap;
+        for (d, &v) in dist.iter_mut().zip(row).rev() {
+            run = if v { (run + 1).min(cap) } else { 0 };
+            *d = (*d).min(run);
+        }
+    }
+    for y in y0..=y1 {
+        for x in 0..w {
+            if !region.data[y * w + x] {
+                continue;
+            }
+            let near = |dy: usize, yy: usize| {
+                let d = horizontal[(yy - r0) * w + x] as usize;
+                ((d * d + dy * dy) as f32) < m2
+            };
+            let shallow = (0..rows_below)
+                .any(|dy| (y >= dy && near(dy, y - dy)) || (y + dy < h && near(dy, y + dy)));
+            out.data[y * w + x] = !shallow;
+        }
+    }
+    out
+}
+
 /// Squared distance (px²) to the nearest `true` pixel and that pixel's index (y·w + x), for
 /// every pixel; index `u32::MAX` and distance ∞ when there is none. Same two passes as
 /// [`squared_edt`], carrying the argmin: the fit uses it to find, for a band pixel, the contour
@@ -313,6 +379,60 @@ mod tests {
                 assert_eq!(inside.data[i], want, "depth {w}x{h} pixel {i}");
             }
         }
+    }
+
+    /// The row-window test equals a threshold of the transform, margins inside and beyond its
+    /// row windows (the transform's path) included, on blobs touching the image's edges.
+    #[test]
+    fn deep_inside_equals_the_thresholded_depth() {
+        let mut rng = Rng::new(53);
+        for trial in 0..120 {
+            let (w, h) = (1 + rng.below(60), 1 + rng.below(45));
+            let (cx, cy, r) = (
+                rng.range(-5.0, w as f64 + 5.0),
+                rng.range(-5.0, h as f64 + 5.0),
+                rng.range(0.0, 25.0),
+            );
+            let holes = [0.0, 0.002, 0.02, 0.2][trial % 4];
+            let mask = Plane::from_vec(
+                w,
+                h,
+                (0..w * h)
+                    .map(|i| {
+                        let (x, y) = ((i % w) as f64, (i / w) as f64);
+                        (x - cx).hypot(y - cy) < r && rng.uniform() >= holes
+                    })
+                    .collect(),
+            )
+            .unwrap();
+            let depth = squared_depth_inside(&mask);
+            for margin in [
+                0.0f32,
+                0.5,
+                1.0,
+                1.5,
+                2.0,
+                2.9,
+                3.0,
+                3.2,
+                7.0,
+                16.0,
+                17.5,
+                f32::NAN,
+            ] {
+                let want: Vec<bool> = (0..w * h)
+                    .map(|i| mask.data[i] && depth.data[i] >= margin * margin)
+                    .collect();
+                assert_eq!(
+                    deep_inside(&mask, margin).data,
+                    want,
+                    "{w}x{h}, margin {margin}, trial {trial}"
+                );
+            }
+        }
+        // Every pixel true: no `false` pixel anywhere, every pixel deep.
+        let full = Plane::filled(7, 5, true);
+        assert!(deep_inside(&full, 3.0).data.iter().all(|&d| d));
     }
 
     #[test]
