@@ -851,6 +851,47 @@ mod tests {
         }
     }
 
+    /// The one-pass AVX2 tables equal the portable ones bit for bit, on sizes from one pixel
+    /// to rows longer than a vector, and leave recycled tables' other rows alone.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn avx2_summed_areas_equal_the_portable_ones() {
+        if !has_avx2() {
+            return;
+        }
+        for (seed, (w, h)) in [(1usize, 1usize), (2, 1), (1, 3), (2, 2), (9, 4), (37, 11)]
+            .into_iter()
+            .enumerate()
+        {
+            let base = base_of(&noise_frame(seed as u64, w as u32, h as u32));
+            let (sums, squares) = (
+                summed_area(&TABLES_SUMS, &base, w, h, |px, c| px[c] as u32),
+                summed_area(&TABLES_SQUARES, &base, w, h, |px, c| (px[c] as u32).pow(2)),
+            );
+            // Tables full of garbage, first row and column cleared, as the pool gives them.
+            let mut fast_sums = vec![[7u32; CHANNELS]; (w + 1) * (h + 1)];
+            let mut fast_squares = vec![[9u32; BANK_CHANNELS]; (w + 1) * (h + 1)];
+            for (t, row) in fast_sums.chunks_exact_mut(w + 1).enumerate() {
+                row[0] = [0; CHANNELS];
+                if t == 0 {
+                    row.fill([0; CHANNELS]);
+                }
+            }
+            for (t, row) in fast_squares.chunks_exact_mut(w + 1).enumerate() {
+                row[0] = [0; BANK_CHANNELS];
+                if t == 0 {
+                    row.fill([0; BANK_CHANNELS]);
+                }
+            }
+            // SAFETY: the CPU supports AVX2 (checked above).
+            unsafe {
+                super::super::tables_avx2::fill(&base, (w, h), &mut fast_sums, &mut fast_squares)
+            };
+            assert!(fast_sums == sums, "sums of {w}×{h}");
+            assert!(fast_squares == squares, "squares of {w}×{h}");
+        }
+    }
+
     /// Every windowed feature equals a brute-force sum over its clipped window.
     #[test]
     fn integral_features_match_brute_force() {

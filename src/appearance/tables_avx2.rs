@@ -38,10 +38,11 @@ pub(super) fn fill(
             let bytes =
                 _mm_cvtsi64_si128(i64::from_le_bytes([p[0], p[1], p[2], p[3], p[4], 0, 0, 0]));
             row = _mm256_add_epi32(row, _mm256_cvtepu8_epi32(bytes));
-            // 255² fits in 16 bits: squared as u16, widened; lane 3 (not a bank channel) cleared.
+            // 255² fits in 16 bits: squared as u16, widened. Lane 3 (not a bank channel) is
+            // only ever written where the next entry will be, or masked off.
             let wide = _mm_cvtepu8_epi16(bytes);
             let square = _mm_cvtepu16_epi32(_mm_mullo_epi16(wide, wide));
-            row_squares = _mm_add_epi32(row_squares, _mm_and_si128(square, keep_squares));
+            row_squares = _mm_add_epi32(row_squares, square);
             let (up, at) = (above + x, here + x);
             // SAFETY: `at` and `up` are entries 1..=w of rows y+1 and y, inside the tables
             // (asserted above). Before the row's last entry, the vectors reach 12 (sums) and 4
