@@ -19,7 +19,7 @@ use crate::appearance::{Appearance, ClassMap};
 use crate::error::Error;
 use crate::geometry::{Affine, Camera};
 use crate::plane::{LabelImage, Mask};
-use crate::render::raster::{RasterOptions, rasterize};
+use crate::render::raster::{NO_OBJECT, RasterOptions, RenderObject, rasterize_objects};
 use crate::scene::Scene;
 use glam::DVec3;
 use rayon::prelude::*;
@@ -242,18 +242,25 @@ pub fn render_state(scene: &Scene, model: &Model, state: &FitState) -> Rendered 
     let visible = model.indices(true);
     let labels_of: Vec<u8> = visible.iter().map(|&i| model.structures[i].label).collect();
     let objects = model.objects(&posed, &visible);
+    // Every view's labels and every hidden structure's masks at once: full-resolution rasters
+    // of object indices only (the fit's surface planes are not needed here).
+    let raster = |c: &Camera, objects: &[RenderObject]| {
+        rasterize_objects(c, objects, &RasterOptions::default())
+    };
     let labels = cams
-        .iter()
-        .map(|c| rasterize(c, &objects, &RasterOptions::default()).label_image(&labels_of))
+        .par_iter()
+        .map(|c| raster(c, &objects).map(|&o| labels_of.get(o as usize).copied().unwrap_or(0)))
         .collect();
     let hidden = (0..model.structures.len())
         .filter(|&i| !model.structures[i].visible)
+        .collect::<Vec<_>>()
+        .into_par_iter()
         .map(|i| {
             let obj = model.objects(&posed, &[i]);
             (
                 model.structures[i].name.clone(),
-                cams.iter()
-                    .map(|c| rasterize(c, &obj, &RasterOptions::default()).coverage())
+                cams.par_iter()
+                    .map(|c| raster(c, &obj).map(|&o| o != NO_OBJECT))
                     .collect(),
             )
         })

@@ -117,6 +117,92 @@ struct Corner {
 pub fn rasterize(camera: &Camera, objects: &[RenderObject], options: &RasterOptions) -> ViewRaster {
     let (w, h) = (camera.width as usize, camera.height as usize);
     let mut out = ViewRaster::empty(w, h);
+    draw(camera, objects, options, &mut out);
+    out
+}
+
+/// The front-most object of every pixel ([`NO_OBJECT`] where none): [`rasterize`]'s `object`
+/// plane, equal to it pixel for pixel (the same triangles, depths and tests), without the
+/// triangle and barycentric planes the fit reads. What output masks need, at a third of the
+/// memory a full-resolution [`ViewRaster`] fills.
+pub fn rasterize_objects(
+    camera: &Camera,
+    objects: &[RenderObject],
+    options: &RasterOptions,
+) -> Plane<u8> {
+    let (w, h) = (camera.width as usize, camera.height as usize);
+    let mut out = ObjectRaster {
+        depth_mm: Plane::filled(w, h, f32::INFINITY),
+        object: Plane::filled(w, h, NO_OBJECT),
+    };
+    draw(camera, objects, options, &mut out);
+    out.object
+}
+
+/// Where [`fill_triangle`] writes the front-most surface of each pixel.
+trait Sink {
+    fn width(&self) -> usize;
+    fn height(&self) -> usize;
+    /// The depth (mm) drawn at pixel `i` so far.
+    fn depth(&self, i: usize) -> f32;
+    /// Pixel `i` is now `object`'s face `triangle` at depth `z`; `bary` gives the face's
+    /// barycentrics, for sinks that keep them.
+    fn put(&mut self, i: usize, z: f32, object: u8, triangle: u32, bary: impl FnOnce() -> [f32; 2]);
+}
+
+impl Sink for ViewRaster {
+    fn width(&self) -> usize {
+        self.object.width
+    }
+    fn height(&self) -> usize {
+        self.object.height
+    }
+    #[inline]
+    fn depth(&self, i: usize) -> f32 {
+        self.depth_mm.data[i]
+    }
+    #[inline]
+    fn put(
+        &mut self,
+        i: usize,
+        z: f32,
+        object: u8,
+        triangle: u32,
+        bary: impl FnOnce() -> [f32; 2],
+    ) {
+        self.depth_mm.data[i] = z;
+        self.object.data[i] = object;
+        self.triangle.data[i] = triangle;
+        self.barycentric.data[i] = bary();
+    }
+}
+
+/// Depth and object only ([`rasterize_objects`]).
+struct ObjectRaster {
+    depth_mm: Plane<f32>,
+    object: Plane<u8>,
+}
+
+impl Sink for ObjectRaster {
+    fn width(&self) -> usize {
+        self.object.width
+    }
+    fn height(&self) -> usize {
+        self.object.height
+    }
+    #[inline]
+    fn depth(&self, i: usize) -> f32 {
+        self.depth_mm.data[i]
+    }
+    #[inline]
+    fn put(&mut self, i: usize, z: f32, object: u8, _: u32, _: impl FnOnce() -> [f32; 2]) {
+        self.depth_mm.data[i] = z;
+        self.object.data[i] = object;
+    }
+}
+
+/// Draws `objects` into `out`, front-most surface per pixel.
+fn draw(camera: &Camera, objects: &[RenderObject], options: &RasterOptions, out: &mut impl Sink) {
     let intr = &camera.intrinsics;
     let distorted = intr.has_distortion();
     for (oi, obj) in objects.iter().enumerate().take(NO_OBJECT as usize) {
@@ -170,7 +256,7 @@ pub fn rasterize(camera: &Camera, objects: &[RenderObject], options: &RasterOpti
                 },
             ];
             let mut target = Target {
-                out: &mut out,
+                out: &mut *out,
                 object: oi as u8,
                 triangle: fi as u32,
             };
@@ -181,11 +267,10 @@ pub fn rasterize(camera: &Camera, objects: &[RenderObject], options: &RasterOpti
             }
         }
     }
-    out
 }
 
-struct Target<'a> {
-    out: &'a mut ViewRaster,
+struct Target<'a, S: Sink> {
+    out: &'a mut S,
     object: u8,
     triangle: u32,
 }
@@ -203,12 +288,12 @@ fn edge_bow(camera: &Camera, a: &Corner, b: &Corner) -> f64 {
     (e.perp_dot(m - a.px) / len).abs()
 }
 
-fn subdivide(
+fn subdivide<S: Sink>(
     camera: &Camera,
     c: &[Corner; 3],
     options: &RasterOptions,
     level: u32,
-    target: &mut Target,
+    target: &mut Target<S>,
 ) {
     // Edges bow, and the interior stretches unevenly: check the centroid too.
     let centroid_shift = camera
@@ -253,7 +338,7 @@ fn subdivide(
 }
 
 /// Scan-converts one (sub)triangle with a depth test, sampling pixel centres.
-fn fill_triangle(c: &[Corner; 3], target: &mut Target) {
+fn fill_triangle<S: Sink>(c: &[Corner; 3], target: &mut Target<S>) {
     let (w, h) = (target.out.width(), target.out.height());
     let [a, b, d] = [c[0].px, c[1].px, c[2].px];
     let area = (b - a).perp_dot(d - a);
@@ -289,15 +374,16 @@ fn fill_triangle(c: &[Corner; 3], target: &mut Target) {
             let iz = l0 * inv_z[0] + l1 * inv_z[1] + l2 * inv_z[2];
             let z = 1.0 / iz;
             let i = y * w + x;
-            if (z as f32) < target.out.depth_mm.data[i] {
-                let bary = (c[0].bary * (l0 * inv_z[0])
-                    + c[1].bary * (l1 * inv_z[1])
-                    + c[2].bary * (l2 * inv_z[2]))
-                    * z;
-                target.out.depth_mm.data[i] = z as f32;
-                target.out.object.data[i] = target.object;
-                target.out.triangle.data[i] = target.triangle;
-                target.out.barycentric.data[i] = [bary.x as f32, bary.y as f32];
+            if (z as f32) < target.out.depth(i) {
+                target
+                    .out
+                    .put(i, z as f32, target.object, target.triangle, || {
+                        let bary = (c[0].bary * (l0 * inv_z[0])
+                            + c[1].bary * (l1 * inv_z[1])
+                            + c[2].bary * (l2 * inv_z[2]))
+                            * z;
+                        [bary.x as f32, bary.y as f32]
+                    });
             }
         }
     }
