@@ -159,18 +159,32 @@ pub fn deep_inside(region: &Mask, margin: f32) -> Mask {
             *d = (*d).min(run);
         }
     }
+    // Squared distances are small integers here (exact in f32): compared as integers against
+    // the least one that is not nearer than the margin.
+    let enough = (0..=cap * cap)
+        .find(|&d2| (d2 as f32) >= m2)
+        .unwrap_or(cap * cap);
+    let mut nearest = vec![0u32; w];
     for y in y0..=y1 {
-        for x in 0..w {
-            if !region.data[y * w + x] {
-                continue;
+        nearest.fill(u32::MAX);
+        for dy in 0..rows_below {
+            for yy in [y.checked_sub(dy), Some(y + dy).filter(|&v| dy > 0 && v < h)]
+                .into_iter()
+                .flatten()
+            {
+                let dist = &horizontal[(yy - r0) * w..(yy + 1 - r0) * w];
+                let dy2 = (dy * dy) as u32;
+                for (n, &d) in nearest.iter_mut().zip(dist) {
+                    *n = (*n).min(d * d + dy2);
+                }
             }
-            let near = |dy: usize, yy: usize| {
-                let d = horizontal[(yy - r0) * w + x] as usize;
-                ((d * d + dy * dy) as f32) < m2
-            };
-            let shallow = (0..rows_below)
-                .any(|dy| (y >= dy && near(dy, y - dy)) || (y + dy < h && near(dy, y + dy)));
-            out.data[y * w + x] = !shallow;
+        }
+        let (row, deep) = (
+            &region.data[y * w..(y + 1) * w],
+            &mut out.data[y * w..(y + 1) * w],
+        );
+        for ((o, &r), &n) in deep.iter_mut().zip(row).zip(&nearest) {
+            *o = r && n >= enough;
         }
     }
     out
