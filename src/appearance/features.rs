@@ -683,7 +683,12 @@ pub(super) fn mean(sum: u32, area: u32) -> f32 {
 /// A feature value (0–255 scale) rounded to u8, saturating.
 #[inline]
 pub(super) fn quantise(v: f32) -> u8 {
-    (v.clamp(0.0, 255.0) + 0.5) as u8
+    // max/min (NaN → 0, as the saturating cast gives it) put v + 0.5 in [0.5, 255.5], so the
+    // unchecked conversion is defined and equals `(v.clamp(0.0, 255.0) + 0.5) as u8`; unlike
+    // that saturating cast it compiles to vector conversions in the dense path's row loops.
+    let v = v.max(0.0).min(255.0) + 0.5;
+    // SAFETY: v is finite and within i32's range (above).
+    unsafe { v.to_int_unchecked::<i32>() as u8 }
 }
 
 /// Three standard deviations of a window from its sum, sum of squares and pixel count,
