@@ -12,6 +12,7 @@ use crate::plane::dice;
 use crate::scene::labels::read_label_png_sized;
 use crate::scene::write::{write_json_atomic, write_labels, write_mask};
 use crate::scene::{Scene, Trajectory, TrajectoryFrame};
+use rayon::prelude::*;
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -295,32 +296,40 @@ impl<'a> Recorder<'a> {
         let scene = self.scene;
         let out = self.out;
         let t = f.frame;
-        for (c, cam) in scene.cameras.iter().enumerate() {
-            write_labels(
-                &out.join(format!("masks/{}/{t:06}.png", cam.name)),
-                &f.labels[c],
-            )?;
-            for (name, masks) in &f.hidden {
-                write_mask(
-                    &out.join(format!("hidden/{name}/{}/{t:06}.png", cam.name)),
-                    &masks[c],
+        // Every view's files at once (PNG encoding is most of it); the first view's error is
+        // the one reported, as when they were written in turn.
+        let written: Vec<Result<(), Error>> = (0..scene.cameras.len())
+            .into_par_iter()
+            .map(|c| {
+                let cam = &scene.cameras[c];
+                write_labels(
+                    &out.join(format!("masks/{}/{t:06}.png", cam.name)),
+                    &f.labels[c],
                 )?;
-            }
-            for (name, masks) in &f.region_masks {
-                write_mask(
-                    &out.join(format!("hidden_region/{name}/{}/{t:06}.png", cam.name)),
-                    &masks[c],
-                )?;
-            }
-            if self.overlays {
-                let mut img = (*scene.frame(c, t)?).clone();
-                crate::overlay::draw_tracked(&mut img, scene, f, c);
-                crate::scene::write::write_rgb(
-                    &out.join(format!("overlay/{}/{t:06}.png", cam.name)),
-                    &img,
-                )?;
-            }
-        }
+                for (name, masks) in &f.hidden {
+                    write_mask(
+                        &out.join(format!("hidden/{name}/{}/{t:06}.png", cam.name)),
+                        &masks[c],
+                    )?;
+                }
+                for (name, masks) in &f.region_masks {
+                    write_mask(
+                        &out.join(format!("hidden_region/{name}/{}/{t:06}.png", cam.name)),
+                        &masks[c],
+                    )?;
+                }
+                if self.overlays {
+                    let mut img = (*scene.frame(c, t)?).clone();
+                    crate::overlay::draw_tracked(&mut img, scene, f, c);
+                    crate::scene::write::write_rgb(
+                        &out.join(format!("overlay/{}/{t:06}.png", cam.name)),
+                        &img,
+                    )?;
+                }
+                Ok(())
+            })
+            .collect();
+        written.into_iter().collect::<Result<(), Error>>()?;
         let frame_scores = frame_dice(scene, f)?;
         for (name, d) in &frame_scores {
             self.by_structure.entry(name.clone()).or_default().push(*d);

@@ -127,7 +127,7 @@ pub fn region_masks(
             Some((
                 name.clone(),
                 masks
-                    .iter()
+                    .par_iter()
                     .zip(cams)
                     .map(|(m, c)| super::hidden_region::region_mask(m, c, region))
                     .collect(),
