@@ -93,6 +93,26 @@ fn place_by_dragging_save_and_load_a_session_and_autosave() {
     let (t0, t1) = (before.translation_mm(), after.translation_mm());
     assert!(t1.x - t0.x > 1.0, "moved right: {t0} → {t1}");
     assert!((t1.y - t0.y).abs() < 0.2 * (t1.x - t0.x) && (t1.z - t0.z).abs() < 0.2 * (t1.x - t0.x));
+    // A second drag is a step of its own: Ctrl+Z takes it back and leaves the first.
+    drag(&mut h, v.center(), v.center() + vec2(0.0, 30.0));
+    assert_ne!(
+        h.state().doc.placement,
+        Some(after),
+        "the second drag moved the model"
+    );
+    h.key_press_modifiers(Modifiers::COMMAND, egui::Key::Z);
+    h.step();
+    assert_eq!(
+        h.state().doc.placement,
+        Some(after),
+        "Undo took back the second drag only"
+    );
+    h.key_press_modifiers(Modifiers::COMMAND, egui::Key::Z);
+    h.step();
+    assert_eq!(h.state().doc.placement, Some(before), "and then the first");
+    drag(&mut h, v.center(), v.center() + vec2(40.0, 0.0));
+    let after = h.state().doc.placement.unwrap();
+    assert!(after.translation_mm().x - t0.x > 1.0, "moved right again");
 
     // Space, both the play key and (held) the pan key of the action table: a press plays and
     // pauses; held for a drag it pans the views and leaves playing alone.

@@ -50,8 +50,12 @@ pub enum AppCommand {
         dab: Dab,
     },
     EndStroke,
-    /// The model moved by hand to `affine` (this frame's fit is dropped: fit again from here).
-    Place(Affine),
+    /// The model moved by hand to `affine` (this frame's fit is dropped: fit again from here);
+    /// `new_step`: the move begins a gesture, which Undo takes back apart from the one before.
+    Place {
+        affine: Affine,
+        new_step: bool,
+    },
     DiscardAutosave,
     DismissError,
     /// Pick a file or folder for a field of the New scene form.
@@ -161,8 +165,8 @@ impl EndofuseApp {
                     self.doc.editor.end_stroke();
                 }
             }
-            AppCommand::Place(affine) => {
-                self.doc.place(self.view.frame, affine);
+            AppCommand::Place { affine, new_step } => {
+                self.doc.place(self.view.frame, affine, new_step);
                 self.screen.textures.forget_overlays();
             }
             AppCommand::DiscardAutosave => self.discard_autosave(),

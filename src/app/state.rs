@@ -153,11 +153,14 @@ pub enum Undid {
 
 impl Document {
     /// Moves the model by hand to `affine` on `frame`, setting that frame's fit aside; both
-    /// come back with [`Document::undo`].
-    pub fn place(&mut self, frame: usize, affine: Affine) {
-        let continuing = self.placement_undo.last().is_some_and(|u| {
-            u.frame == frame && u.edits_after == self.edits && self.editor.newest_is_mark(u.id)
-        });
+    /// come back with [`Document::undo`]. `new_step`: this move begins a gesture (a drag, a
+    /// run of wheel turns), so Undo takes it back apart from the gesture before; the moves of
+    /// one gesture undo as one.
+    pub fn place(&mut self, frame: usize, affine: Affine, new_step: bool) {
+        let continuing = !new_step
+            && self.placement_undo.last().is_some_and(|u| {
+                u.frame == frame && u.edits_after == self.edits && self.editor.newest_is_mark(u.id)
+            });
         if !continuing {
             let id = self.placement_undo.last().map_or(0, |u| u.id + 1);
             self.placement_undo.push(PlacementUndo {
@@ -450,7 +453,7 @@ mod tests {
         stroke(&mut doc, 1);
         // One drag is many moves: they undo as one.
         for x in 1..=5 {
-            doc.place(3, moved(x as f64));
+            doc.place(3, moved(x as f64), x == 1);
         }
         assert!(!doc.results.contains_key(&3));
         assert_eq!(doc.placement, Some(moved(5.0)));
@@ -474,6 +477,26 @@ mod tests {
         assert!(!doc.can_undo());
     }
 
+    /// Two drags in a row, nothing between them, are two steps: Undo takes back the second
+    /// and leaves the first.
+    #[test]
+    fn consecutive_gestures_undo_one_at_a_time() {
+        let mut doc = Document {
+            editor: SeedEditor::new(&Seeds::default(), vec![(16, 16)]),
+            placement: Some(moved(0.0)),
+            ..Document::default()
+        };
+        for (x, first) in [(1.0, true), (2.0, false), (3.0, true), (4.0, false)] {
+            doc.place(2, moved(x), first);
+        }
+        assert_eq!(doc.editor.undo_steps(), 2);
+        assert_eq!(doc.undo(), Undid::Move { restored: None });
+        assert_eq!(doc.placement, Some(moved(2.0)), "the first drag stays");
+        assert_eq!(doc.undo(), Undid::Move { restored: None });
+        assert_eq!(doc.placement, Some(moved(0.0)));
+        assert!(!doc.can_undo());
+    }
+
     /// A stroke between two moves keeps them apart, and Undo takes back the second move,
     /// the stroke and the first move in that order; a fit that arrives after a move is not
     /// replaced by the fit the move set aside.
@@ -485,9 +508,9 @@ mod tests {
             ..Document::default()
         };
         doc.results.insert(1, result(1, 5.0));
-        doc.place(1, moved(1.0));
+        doc.place(1, moved(1.0), true);
         stroke(&mut doc, 1);
-        doc.place(1, moved(2.0));
+        doc.place(1, moved(2.0), true);
         assert_eq!(doc.placement_undo.len(), 2);
         assert_eq!(
             doc.undo(),
@@ -506,7 +529,7 @@ mod tests {
         assert_eq!(doc.placement, Some(moved(0.0)));
 
         // A move, then a fit of that frame arrives: Undo leaves the new fit alone.
-        doc.place(1, moved(3.0));
+        doc.place(1, moved(3.0), true);
         doc.forget_placement_undo();
         doc.results.insert(1, result(1, 9.0));
         assert_eq!(doc.undo(), Undid::Nothing);
@@ -521,10 +544,10 @@ mod tests {
             editor: SeedEditor::new(&Seeds::default(), vec![(16, 16)]),
             ..Document::default()
         };
-        doc.place(0, moved(1.0));
+        doc.place(0, moved(1.0), true);
         doc.results.insert(0, result(0, 2.0));
         doc.touch();
-        doc.place(0, moved(2.0));
+        doc.place(0, moved(2.0), true);
         assert_eq!(doc.placement_undo.len(), 2);
         assert_eq!(doc.undo(), Undid::Move { restored: Some(0) });
         assert_eq!(doc.placement, Some(moved(1.0)));

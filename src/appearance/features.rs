@@ -686,6 +686,7 @@ pub(super) fn quantise(v: f32) -> u8 {
     // max/min (NaN → 0, as the saturating cast gives it) put v + 0.5 in [0.5, 255.5], so the
     // unchecked conversion is defined and equals `(v.clamp(0.0, 255.0) + 0.5) as u8`; unlike
     // that saturating cast it compiles to vector conversions in the dense path's row loops.
+    #[allow(clippy::manual_clamp)] // clamp keeps NaN, which the conversion must not see
     let v = v.max(0.0).min(255.0) + 0.5;
     // SAFETY: v is finite and within i32's range (above).
     unsafe { v.to_int_unchecked::<i32>() as u8 }

@@ -32,7 +32,15 @@ pub struct StrokeState {
     painting: bool,
     /// The pan key is held and a pan happened (so its release does not also press it).
     pub panned_with_key: bool,
+    /// A drag of the model is under way (its later moves continue its undo step).
+    placing: bool,
+    /// When the wheel last moved the model (s of input time): turns within a moment of each
+    /// other are one gesture, one undo step.
+    wheel_placed_s: Option<f64>,
 }
+
+/// Wheel turns further apart than this (s) are separate gestures of the model.
+const WHEEL_GESTURE_GAP_S: f64 = 0.6;
 
 /// What the views keep between frames that is theirs alone: textures, the stroke in progress,
 /// where things were drawn, the frame loader, and whether wgpu draws the overlay.
@@ -305,12 +313,16 @@ fn interact(
         }
         return;
     }
-    let place = |pan: Vec2, rotate: Vec2, depth_mm: f64| {
+    let place = |pan: Vec2, rotate: Vec2, depth_mm: f64, new_step: bool| {
         if let Some(moved) = place::moved_placement(shown.doc, view.frame, c, pan, rotate, depth_mm)
         {
-            send(AppCommand::Place(moved));
+            send(AppCommand::Place {
+                affine: moved,
+                new_step,
+            });
         }
     };
+    let now_s = ctx.input(|i| i.time);
     // Wheel: zoom about the cursor; Shift+wheel: brush size; in Place mode, depth.
     if response.hovered() {
         let scroll = ctx.input(|i| i.smooth_scroll_delta);
@@ -323,7 +335,10 @@ fn interact(
                     1.0 / 1.1
                 }));
             } else if view.tool == Tool::Place && shown.doc.placement.is_some() {
-                place(Vec2::ZERO, Vec2::ZERO, -(amount as f64) * 0.05);
+                let wheel = &mut screen.stroke.wheel_placed_s;
+                let new_step = wheel.is_none_or(|t| now_s - t > WHEEL_GESTURE_GAP_S);
+                *wheel = Some(now_s);
+                place(Vec2::ZERO, Vec2::ZERO, -(amount as f64) * 0.05, new_step);
             } else if let Some(p) = response.hover_pos() {
                 transform.zoom_about(rect, cam_size, p, (amount * 0.002).exp());
                 send(AppCommand::SetTransform(transform));
@@ -376,13 +391,23 @@ fn interact(
             }
         }
         Tool::Place => {
+            let stroke = &mut screen.stroke;
             if response.dragged() && shown.doc.placement.is_some() {
                 let d = response.drag_delta() / transform.scale(rect, cam_size);
+                let new_step = !stroke.placing;
                 if secondary || modifiers.command {
-                    place(Vec2::ZERO, d * 0.01, 0.0);
+                    place(Vec2::ZERO, d * 0.01, 0.0, new_step);
+                    stroke.placing = true;
                 } else if primary {
-                    place(d, Vec2::ZERO, 0.0);
+                    place(d, Vec2::ZERO, 0.0, new_step);
+                    stroke.placing = true;
                 }
+                // A drag is a gesture of its own, apart from wheel turns before and after.
+                stroke.wheel_placed_s = None;
+            }
+            // Ended with the button (every view runs this; only one is dragged).
+            if !(primary || secondary) {
+                stroke.placing = false;
             }
         }
     }
