@@ -126,6 +126,14 @@ fn paint_train_track_scrub_and_review_the_demo() {
     step_until(&mut h, "the probability maps", |a| {
         a.has_probabilities(a.view.frame)
     });
+    // And the held-out check of the strokes, which finishes sooner or later depending on the
+    // build: the panel shows its figure, not "checking…".
+    step_until(&mut h, "the held-out check", |a| {
+        a.doc
+            .appearance
+            .as_ref()
+            .is_some_and(|f| f.validation.is_some())
+    });
     h.state_mut().status.notice = None;
     // Hide the seeds in the left view only (its "seeds" toggle under the title), to see the
     // map under them; the right view keeps them. Both show the map's colour scale.

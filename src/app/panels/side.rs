@@ -151,7 +151,9 @@ fn side_contents(shown: &Shown, ui: &mut egui::Ui) {
             Some(v) if v.worst_class_accuracy < 0.8 => Color32::from_rgb(255, 190, 70),
             _ => ui.visuals().text_color(),
         };
-        ui.horizontal(|ui| {
+        // Two lines, not one row: the check's words change as it runs, and a row that grows
+        // widened the panel and shifted the views beside it.
+        {
             ui.label(format!(
                 "{} samples, {:.2} s",
                 a.stats.samples, a.stats.train_s
@@ -178,7 +180,7 @@ fn side_contents(shown: &Shown, ui: &mut egui::Ui) {
                          on strokes it did not learn."
                         .to_string(),
                 });
-        });
+        }
     } else {
         ui.label(RichText::new("not trained yet").weak());
     }
