@@ -41,7 +41,8 @@ pub enum Phase {
     StereoImages,
     /// Inside stereo matching: the epipolar searches of every point.
     StereoSearch,
-    /// After the fit, outside its per-frame time: the frame's output masks (the three below).
+    /// After the fit, outside its per-frame time: the frame's output masks (the three below,
+    /// and the hidden regions' margins).
     Outputs,
     /// Inside the outputs: the full-resolution label and hidden-structure rasters.
     OutputRasters,

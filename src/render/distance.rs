@@ -122,7 +122,8 @@ const ROW_WINDOW_MAX_MARGIN_PX: f32 = 16.0;
 pub fn deep_inside(region: &Mask, margin: f32) -> Mask {
     let (w, h) = (region.width, region.height);
     let m2 = margin * margin;
-    if margin.is_nan() || margin > ROW_WINDOW_MAX_MARGIN_PX {
+    // The depth is compared with margin², so a negative margin is its magnitude.
+    if margin.is_nan() || margin.abs() > ROW_WINDOW_MAX_MARGIN_PX {
         // Wide, or NaN (nothing passes a comparison with NaN, as in the transform's case).
         let depth = squared_depth_inside(region);
         let data = region.data.iter().zip(&depth.data);
@@ -138,7 +139,7 @@ pub fn deep_inside(region: &Mask, margin: f32) -> Mask {
     };
     // Horizontal distances to the row's nearest `false` pixel, capped where they can no
     // longer matter (cap² > margin²): rows outside the bounds are all `false` (distance 0).
-    let cap = margin.max(0.0).ceil() as u32 + 1;
+    let cap = margin.abs().ceil() as u32 + 1;
     let rows_below = (0..=cap as usize)
         .take_while(|&dy| ((dy * dy) as f32) < m2)
         .count();
@@ -396,7 +397,8 @@ mod tests {
     }
 
     /// The row-window test equals a threshold of the transform, margins inside and beyond its
-    /// row windows (the transform's path) included, on blobs touching the image's edges.
+    /// row windows (the transform's path), negative and infinite ones included, on blobs
+    /// touching the image's edges.
     #[test]
     fn deep_inside_equals_the_thresholded_depth() {
         let mut rng = Rng::new(53);
@@ -433,6 +435,10 @@ mod tests {
                 16.0,
                 17.5,
                 f32::NAN,
+                -2.0,
+                -0.5,
+                f32::INFINITY,
+                f32::NEG_INFINITY,
             ] {
                 let want: Vec<bool> = (0..w * h)
                     .map(|i| mask.data[i] && depth.data[i] >= margin * margin)

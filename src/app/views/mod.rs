@@ -42,6 +42,12 @@ pub struct StrokeState {
 /// Wheel turns further apart than this (s) are separate gestures of the model.
 const WHEEL_GESTURE_GAP_S: f64 = 0.6;
 
+/// Does a wheel move of the model at `now_s` begin an undo step of its own? Not during a drag
+/// (it joins the drag's), nor within [`WHEEL_GESTURE_GAP_S`] of the wheel's last move.
+fn wheel_starts_step(placing: bool, last_wheel_s: Option<f64>, now_s: f64) -> bool {
+    !placing && last_wheel_s.is_none_or(|t| now_s - t > WHEEL_GESTURE_GAP_S)
+}
+
 /// What the views keep between frames that is theirs alone: textures, the stroke in progress,
 /// where things were drawn, the frame loader, and whether wgpu draws the overlay.
 pub struct Screen {
@@ -335,9 +341,11 @@ fn interact(
                     1.0 / 1.1
                 }));
             } else if view.tool == Tool::Place && shown.doc.placement.is_some() {
-                let wheel = &mut screen.stroke.wheel_placed_s;
-                let new_step = wheel.is_none_or(|t| now_s - t > WHEEL_GESTURE_GAP_S);
-                *wheel = Some(now_s);
+                // During a drag the wheel's moves join the drag's step (egui spreads a notch
+                // over several frames, so they can outlast the drag's first frames too).
+                let stroke = &mut screen.stroke;
+                let new_step = wheel_starts_step(stroke.placing, stroke.wheel_placed_s, now_s);
+                stroke.wheel_placed_s = Some(now_s);
                 place(Vec2::ZERO, Vec2::ZERO, -(amount as f64) * 0.05, new_step);
             } else if let Some(p) = response.hover_pos() {
                 transform.zoom_about(rect, cam_size, p, (amount * 0.002).exp());
@@ -410,5 +418,21 @@ fn interact(
                 stroke.placing = false;
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::wheel_starts_step;
+
+    /// A run of wheel turns is one step; a pause, or none before, begins one; during a drag
+    /// the wheel never does.
+    #[test]
+    fn wheel_turns_are_one_step_unless_apart_and_join_a_drag() {
+        assert!(wheel_starts_step(false, None, 3.0));
+        assert!(!wheel_starts_step(false, Some(2.9), 3.0));
+        assert!(wheel_starts_step(false, Some(2.0), 3.0));
+        assert!(!wheel_starts_step(true, None, 3.0));
+        assert!(!wheel_starts_step(true, Some(1.0), 3.0));
     }
 }
