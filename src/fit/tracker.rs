@@ -19,7 +19,9 @@ use crate::appearance::{Appearance, ClassMap};
 use crate::error::Error;
 use crate::geometry::{Affine, Camera};
 use crate::plane::{LabelImage, Mask};
-use crate::render::raster::{NO_OBJECT, RasterOptions, RenderObject, rasterize_objects};
+use crate::render::raster::{
+    RasterOptions, RenderObject, coverage, label_image, rasterize_objects,
+};
 use crate::scene::Scene;
 use glam::DVec3;
 use rayon::prelude::*;
@@ -249,7 +251,7 @@ pub fn render_state(scene: &Scene, model: &Model, state: &FitState) -> Rendered 
     };
     let labels = cams
         .par_iter()
-        .map(|c| raster(c, &objects).map(|&o| labels_of.get(o as usize).copied().unwrap_or(0)))
+        .map(|c| label_image(&raster(c, &objects), &labels_of))
         .collect();
     let hidden = (0..model.structures.len())
         .filter(|&i| !model.structures[i].visible)
@@ -260,7 +262,7 @@ pub fn render_state(scene: &Scene, model: &Model, state: &FitState) -> Rendered 
             (
                 model.structures[i].name.clone(),
                 cams.par_iter()
-                    .map(|c| raster(c, &obj).map(|&o| o != NO_OBJECT))
+                    .map(|c| coverage(&raster(c, &obj)))
                     .collect(),
             )
         })

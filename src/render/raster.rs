@@ -85,13 +85,12 @@ impl ViewRaster {
 
     /// Pixels covered by anything.
     pub fn coverage(&self) -> Mask {
-        self.object.map(|&o| o != NO_OBJECT)
+        coverage(&self.object)
     }
 
     /// Label image: `labels[object]` where an object is front-most, 0 elsewhere.
     pub fn label_image(&self, labels: &[u8]) -> LabelImage {
-        self.object
-            .map(|&o| labels.get(o as usize).copied().unwrap_or(0))
+        label_image(&self.object, labels)
     }
 
     /// The reference-frame surface point behind pixel `i`, if any.
@@ -103,6 +102,17 @@ impl ViewRaster {
         let [a, b, c] = f.map(|k| obj.vertices[k as usize]);
         Some(a * (1.0 - b1 - b2) + b * b1 + c * b2)
     }
+}
+
+/// Pixels an object plane (`ViewRaster::object`, [`rasterize_objects`]) covers.
+pub fn coverage(object: &Plane<u8>) -> Mask {
+    object.map(|&o| o != NO_OBJECT)
+}
+
+/// An object plane as a label image: `labels[object]` where an object is front-most, 0
+/// elsewhere.
+pub fn label_image(object: &Plane<u8>, labels: &[u8]) -> LabelImage {
+    object.map(|&o| labels.get(o as usize).copied().unwrap_or(0))
 }
 
 /// A projected vertex: pixel, camera depth, and where it lies in the original triangle.
@@ -575,6 +585,33 @@ mod tests {
 
     /// Culling closed objects' back faces changes nothing a raster says (object, triangle,
     /// depth), mirrored meshes included (their faces wind the other way).
+    /// The object-only raster is the full raster's object plane, pixel for pixel, with and
+    /// without distortion (subdivided triangles) and with back faces culled.
+    #[test]
+    fn object_rasters_equal_the_full_rasters_object_plane() {
+        let mut rng = Rng::new(73);
+        for k1 in [0.0, -0.25] {
+            let (cam, meshes) = scene(&mut rng, k1);
+            let objects: Vec<RenderObject> = meshes
+                .iter()
+                .map(|m| RenderObject {
+                    vertices: &m.vertices,
+                    faces: &m.faces,
+                    closed: crate::fit::model::is_closed(&m.faces),
+                })
+                .collect();
+            for cull_back_faces in [false, true] {
+                let options = RasterOptions {
+                    cull_back_faces,
+                    ..RasterOptions::default()
+                };
+                let full = rasterize(&cam, &objects, &options);
+                assert!(full.coverage().data.iter().filter(|&&c| c).count() > 500);
+                assert_eq!(rasterize_objects(&cam, &objects, &options), full.object);
+            }
+        }
+    }
+
     #[test]
     fn culling_back_faces_of_closed_meshes_is_exact() {
         let mut rng = Rng::new(71);

@@ -7,7 +7,9 @@ use super::{KIDNEY_DEPTH_MM, Phantom, TOOL_RADIUS_MM, TOOL_TIP_MM};
 use crate::geometry::mesh::vertex_normals;
 use crate::geometry::{Affine, Camera, Mesh};
 use crate::plane::{LabelImage, Mask};
-use crate::render::raster::{NO_OBJECT, RasterOptions, RenderObject, ViewRaster, rasterize};
+use crate::render::raster::{
+    NO_OBJECT, RasterOptions, RenderObject, ViewRaster, coverage, rasterize, rasterize_objects,
+};
 use crate::rng::Rng;
 use crate::scene::TrajectoryFrame;
 use crate::synth::texture::{Material, albedo, fbm};
@@ -149,7 +151,7 @@ impl Phantom {
                 name.to_string(),
                 cameras
                     .iter()
-                    .map(|c| rasterize(c, &obj, &RasterOptions::default()).coverage())
+                    .map(|c| coverage(&rasterize_objects(c, &obj, &RasterOptions::default())))
                     .collect(),
             ));
         }
