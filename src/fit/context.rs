@@ -103,38 +103,61 @@ impl FrameContext<'_> {
         block: Block,
         rotation_centre: DVec3,
     ) -> Vec<DVec3> {
+        let mut out = Vec::new();
+        self.surface_jacobian_into(
+            structure,
+            weights,
+            posed,
+            pre,
+            state,
+            block,
+            rotation_centre,
+            &mut out,
+        );
+        out
+    }
+
+    /// [`FrameContext::surface_jacobian`] written into `out` (cleared first): the steps take
+    /// it for every line and match, and a fresh vector each time was a quarter of their cost.
+    #[allow(clippy::too_many_arguments)]
+    pub fn surface_jacobian_into(
+        &self,
+        structure: usize,
+        weights: &[(u32, f64)],
+        posed: DVec3,
+        pre: DVec3,
+        state: &FitState,
+        block: Block,
+        rotation_centre: DVec3,
+        out: &mut Vec<DVec3>,
+    ) {
+        out.clear();
         match block {
             Block::Affine => {
                 // Table II.
                 let j = Affine::jacobian(pre);
-                (0..12)
-                    .map(|k| DVec3::new(j[0][k], j[1][k], j[2][k]))
-                    .collect()
+                out.extend((0..12).map(|k| DVec3::new(j[0][k], j[1][k], j[2][k])));
             }
             Block::Rigid => {
                 // Increments about the current pose: P = R(δω)(P₀ − c₀) + c₀ + δt, where P₀ is
                 // the posed point and c₀ the model centre: the rigid pose's Jacobian at zero
                 // rotation, unit scale, applied to P₀ − c₀ (∂P/∂δω = −[P₀ − c₀]×, ∂P/∂δt = I).
                 let j = RigidPose::default().jacobian(posed - rotation_centre);
-                (0..6)
-                    .map(|k| DVec3::new(j[0][k], j[1][k], j[2][k]))
-                    .collect()
+                out.extend((0..6).map(|k| DVec3::new(j[0][k], j[1][k], j[2][k])));
             }
             Block::Shape => {
                 // Eq. 17: ∂P/∂w_k = R·u_k (R: the affine's linear part).
                 let lin = state.affine.linear();
                 let part = self.model.structures[structure].part;
-                (0..self.model.shape.mode_count())
-                    .map(|k| {
-                        let u = self.model.shape.mode_part(k, part);
-                        lin * weights
-                            .iter()
-                            .map(|&(v, w)| u[v as usize] * w)
-                            .sum::<DVec3>()
-                    })
-                    .collect()
+                out.extend((0..self.model.shape.mode_count()).map(|k| {
+                    let u = self.model.shape.mode_part(k, part);
+                    lin * weights
+                        .iter()
+                        .map(|&(v, w)| u[v as usize] * w)
+                        .sum::<DVec3>()
+                }));
             }
-            Block::Cameras(_) => Vec::new(),
+            Block::Cameras(_) => {}
         }
     }
 

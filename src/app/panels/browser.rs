@@ -247,8 +247,17 @@ impl Browser {
                             } else {
                                 e.name.clone()
                             };
-                            let selected = !e.is_dir && self.name == e.name;
+                            // A folder request picks folders with one click, as it picks
+                            // files elsewhere: the picked one shows so (it fills the field).
+                            let pickable =
+                                !e.is_dir || matches!(self.picker, Picker::Folder { .. });
+                            let selected = pickable && self.name == e.name;
                             let r = ui.selectable_label(selected, text);
+                            let r = if e.is_dir && pickable {
+                                r.on_hover_text("Click: use this folder · double-click: open it")
+                            } else {
+                                r
+                            };
                             if r.double_clicked() {
                                 if e.is_dir {
                                     go = Some(self.folder.join(&e.name));

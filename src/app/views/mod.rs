@@ -402,7 +402,9 @@ fn interact(
             let stroke = &mut screen.stroke;
             if response.dragged() && shown.doc.placement.is_some() {
                 let d = response.drag_delta() / transform.scale(rect, cam_size);
-                let new_step = !stroke.placing;
+                // A drag that starts is a step of its own even when no frame saw the buttons
+                // up between it and the last one (a release and a press in one slow frame).
+                let new_step = !stroke.placing || response.drag_started();
                 if secondary || modifiers.command {
                     place(Vec2::ZERO, d * 0.01, 0.0, new_step);
                     stroke.placing = true;

@@ -175,6 +175,15 @@ impl HeavisideTable {
 /// Lines per parallel work item in sums over lines (fixed, so sums are reproducible).
 pub const LINE_CHUNK: usize = 64;
 
+/// Buffers [`FrameContext::line_jacobian_into`] reuses from one line to the next.
+#[derive(Debug, Default)]
+pub struct JacobianScratch {
+    /// n·∂c/∂ξ of the last line.
+    pub jn: Vec<f64>,
+    /// ∂P/∂ξ of its rim point.
+    surface: Vec<DVec3>,
+}
+
 impl FrameContext<'_> {
     /// The rim point of a line in camera-0 coordinates and its deformed preoperative position.
     fn rim_point(&self, line: &Line, state: &FitState, deformed: &[Vec<DVec3>]) -> (DVec3, DVec3) {
@@ -244,18 +253,24 @@ impl FrameContext<'_> {
         level: usize,
         rotation_centre: DVec3,
     ) -> Option<(DVec2, Vec<f64>)> {
-        let c = self.contour_point(line, state, deformed, level)?;
-        let j = self.point_jacobian(line, state, deformed, block, level, rotation_centre)?;
-        let jn = j
-            .iter()
-            .map(|jk| line.normal.x * jk[0] + line.normal.y * jk[1])
-            .collect();
-        Some((c, jn))
+        let mut scratch = JacobianScratch::default();
+        let c = self.line_jacobian_into(
+            line,
+            state,
+            deformed,
+            block,
+            level,
+            rotation_centre,
+            &mut scratch,
+        )?;
+        Some((c, scratch.jn))
     }
 
-    /// ∂c/∂ξ (2 × block size) of a line's rim point, at the line's level. `rotation_centre`
-    /// is [`FrameContext::rotation_centre`] of `state` (rigid blocks turn about it).
-    fn point_jacobian(
+    /// [`FrameContext::line_jacobian`] with n·∂c/∂ξ left in `scratch.jn`: the steps take it
+    /// for every line, reusing one scratch per chunk of lines (fresh vectors per line were a
+    /// quarter of their time). None where c leaves the view (`scratch.jn` then undefined).
+    #[allow(clippy::too_many_arguments)]
+    pub fn line_jacobian_into(
         &self,
         line: &Line,
         state: &FitState,
@@ -263,7 +278,9 @@ impl FrameContext<'_> {
         block: Block,
         level: usize,
         rotation_centre: DVec3,
-    ) -> Option<Vec<[f64; 2]>> {
+        scratch: &mut JacobianScratch,
+    ) -> Option<DVec2> {
+        let c = self.contour_point(line, state, deformed, level)?;
         let cam = &self.cameras[line.view];
         let intr = &state.intrinsics[line.view];
         let (p, pre) = self.rim_point(line, state, deformed);
@@ -271,24 +288,20 @@ impl FrameContext<'_> {
         let pc = cam.to_camera(p);
         // d pixel / d reference point = J_proj · R_m (eq. 10–11), at the line's level.
         let jr = cam.jacobian_ref_point_with(intr, p)?;
-        let jref = |v: DVec3| -> [f64; 2] {
-            [
-                s * (jr[0][0] * v.x + jr[0][1] * v.y + jr[0][2] * v.z),
-                s * (jr[1][0] * v.x + jr[1][1] * v.y + jr[1][2] * v.z),
-            ]
-        };
-        Some(match block {
-            Block::Cameras(n) => {
-                let mut out = vec![[0.0; 2]; 5 * n];
+        let n = line.normal;
+        let jn = &mut scratch.jn;
+        jn.clear();
+        match block {
+            Block::Cameras(cameras) => {
                 let ji = intr.jacobian_intrinsics(pc)?;
-                for (k, o) in out.iter_mut().skip(5 * line.view).take(5).enumerate() {
-                    *o = [s * ji[0][k], s * ji[1][k]];
+                jn.resize(5 * cameras, 0.0);
+                for (k, o) in jn.iter_mut().skip(5 * line.view).take(5).enumerate() {
+                    *o = n.x * (s * ji[0][k]) + n.y * (s * ji[1][k]);
                 }
-                out
             }
             _ => {
                 let weights = [(line.a, 1.0 - line.t), (line.b, line.t)];
-                self.surface_jacobian(
+                self.surface_jacobian_into(
                     line.structure,
                     &weights,
                     p,
@@ -296,12 +309,16 @@ impl FrameContext<'_> {
                     state,
                     block,
                     rotation_centre,
-                )
-                .into_iter()
-                .map(jref)
-                .collect()
+                    &mut scratch.surface,
+                );
+                jn.extend(scratch.surface.iter().map(|v| {
+                    let along_x = s * (jr[0][0] * v.x + jr[0][1] * v.y + jr[0][2] * v.z);
+                    let along_y = s * (jr[1][0] * v.x + jr[1][1] * v.y + jr[1][2] * v.z);
+                    n.x * along_x + n.y * along_y
+                }));
             }
-        })
+        }
+        Some(c)
     }
 
     /// ∂E/∂ξ for a block, analytic.
@@ -333,12 +350,20 @@ impl FrameContext<'_> {
         let rotation_centre = self.rotation_centre(state, deformed);
         let mut g = vec![0.0; block.size(self.model)];
         let table = HeavisideTable::new(params.heaviside_px, params.half_length);
+        let mut scratch = JacobianScratch::default();
         for line in lines {
-            let Some((c, jn)) =
-                self.line_jacobian(line, state, deformed, block, params.level, rotation_centre)
-            else {
+            let Some(c) = self.line_jacobian_into(
+                line,
+                state,
+                deformed,
+                block,
+                params.level,
+                rotation_centre,
+                &mut scratch,
+            ) else {
                 continue;
             };
+            let jn = &scratch.jn;
             // dE/d(normal displacement of c).
             let de: f64 = line
                 .samples
@@ -346,7 +371,7 @@ impl FrameContext<'_> {
                 .zip(table.of_line(line, c))
                 .map(|(s, (_, dh))| (s.g_f - s.g_b) as f64 * dh)
                 .sum();
-            for (gk, jk) in g.iter_mut().zip(&jn) {
+            for (gk, jk) in g.iter_mut().zip(jn) {
                 *gk += de * jk;
             }
         }
@@ -387,12 +412,20 @@ impl ImageTerm for LineTerm<'_> {
         // Normal equations over lines, in fixed chunks in parallel, added up in order.
         let partial = |chunk: &[Line]| {
             let mut part = NormalEquations::zeros(n);
+            let mut scratch = JacobianScratch::default();
             for line in chunk {
-                let Some((c, jn)) =
-                    ctx.line_jacobian(line, state, deformed, block, ep.level, rotation_centre)
-                else {
+                let Some(c) = ctx.line_jacobian_into(
+                    line,
+                    state,
+                    deformed,
+                    block,
+                    ep.level,
+                    rotation_centre,
+                    &mut scratch,
+                ) else {
                     continue;
                 };
+                let jn = &scratch.jn;
                 let (target, var) = target::line_target(line, c, ep);
                 let w = 1.0 / var;
                 for r in 0..n {

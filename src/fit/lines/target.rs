@@ -8,8 +8,56 @@ use crate::fit::context::FrameContext;
 use crate::fit::state::FitState;
 use glam::DVec2;
 
+/// Longest line [`line_target`] works on the stack for: 2 × 64 + 1 samples (the longest
+/// `energy.half_length` allows) and their shifts; a longer one takes the heap.
+const STACK_SAMPLES: usize = 160;
+
 /// A line's softmin target shift (level px) and its variance, from its 1D energy profile.
 pub fn line_target(line: &Line, c: DVec2, ep: &EnergyParams) -> (f64, f64) {
+    let r = (ep.half_length / 2) as i64;
+    let n = line.samples.len();
+    let shifts = (2 * r + 1) as usize;
+    // The steps ask this of every line at every step: its buffers live on the stack (fresh
+    // vectors per call were most of its cost).
+    if n <= STACK_SAMPLES && n + shifts <= 2 * STACK_SAMPLES {
+        let mut offsets = [0i64; STACK_SAMPLES];
+        let mut heaviside = [0f64; 2 * STACK_SAMPLES];
+        let mut profile = [0f64; STACK_SAMPLES];
+        let mut weights = [0f64; STACK_SAMPLES];
+        if shifts <= STACK_SAMPLES {
+            return target_with(
+                line,
+                c,
+                ep,
+                &mut offsets[..n],
+                &mut heaviside,
+                &mut profile[..shifts],
+                &mut weights[..shifts],
+            );
+        }
+    }
+    target_with(
+        line,
+        c,
+        ep,
+        &mut vec![0; n],
+        &mut vec![0.0; n + shifts + 1],
+        &mut vec![0.0; shifts],
+        &mut vec![0.0; shifts],
+    )
+}
+
+/// [`line_target`] in the given buffers: `offsets` one per sample, `heaviside` at least the
+/// samples' span plus the shifts, `profile` and `weights` one per shift.
+fn target_with(
+    line: &Line,
+    c: DVec2,
+    ep: &EnergyParams,
+    offsets: &mut [i64],
+    heaviside: &mut [f64],
+    profile: &mut [f64],
+    weights: &mut [f64],
+) -> (f64, f64) {
     let r = (ep.half_length / 2) as i64;
     // Samples lie one pixel apart along the normal, so every (sample, shift) pair sees the
     // Heaviside at t₀ + m for an integer m: evaluate those few once instead of per pair.
@@ -17,38 +65,41 @@ pub fn line_target(line: &Line, c: DVec2, ep: &EnergyParams) -> (f64, f64) {
         return (0.0, f64::INFINITY);
     };
     let t0 = line.normal.dot(c - first.pos);
-    let offsets: Vec<i64> = line
-        .samples
-        .iter()
-        .map(|s| (line.normal.dot(c - s.pos) - t0).round() as i64)
-        .collect();
+    for (o, s) in offsets.iter_mut().zip(&line.samples) {
+        *o = (line.normal.dot(c - s.pos) - t0).round() as i64;
+    }
     let lo = offsets.iter().copied().min().unwrap_or(0) - r;
     let hi = offsets.iter().copied().max().unwrap_or(0) + r;
+    let span = (hi - lo + 1) as usize;
+    if span > heaviside.len() {
+        // Samples further apart than one pixel each (a caller's line, not the builder's).
+        return target_with(line, c, ep, offsets, &mut vec![0.0; span], profile, weights);
+    }
     // e^(−(t₀ + m)/w) = e^(−t₀/w) · e^(−1/w)^m: one `exp` and a running product per line.
     let first = (-(t0 + lo as f64) / ep.heaviside_px).exp();
     let ratio = (-1.0 / ep.heaviside_px).exp();
     let mut power = first;
-    let heaviside: Vec<f64> = (lo..=hi)
-        .map(|_| {
-            let h = 1.0 / (1.0 + power);
-            power *= ratio;
-            h
-        })
-        .collect();
-    let profile: Vec<f64> = (-r..=r)
-        .map(|delta| {
-            line.samples
-                .iter()
-                .zip(&offsets)
-                .map(|(s, &m)| {
-                    let h = heaviside[(m + delta - lo) as usize];
-                    s.g_f as f64 * h + s.g_b as f64 * (1.0 - h)
-                })
-                .sum()
-        })
-        .collect();
+    for h in heaviside[..span].iter_mut() {
+        *h = 1.0 / (1.0 + power);
+        power *= ratio;
+    }
+    // Each shift's energy summed over the samples in their order; the shifts side by side,
+    // which read consecutive Heaviside values (the compiler vectorises this loop).
+    profile.fill(0.0);
+    let shifts = profile.len();
+    for (s, &m) in line.samples.iter().zip(offsets.iter()) {
+        let (g_f, g_b) = (s.g_f as f64, s.g_b as f64);
+        let from = (m - r - lo) as usize;
+        for (e, &h) in profile.iter_mut().zip(&heaviside[from..from + shifts]) {
+            *e += g_f * h + g_b * (1.0 - h);
+        }
+    }
+    let profile = &*profile;
     let min = profile.iter().cloned().fold(f64::INFINITY, f64::min);
-    let weights: Vec<f64> = profile.iter().map(|e| (-(e - min)).exp()).collect();
+    for (w, e) in weights.iter_mut().zip(profile) {
+        *w = (-(e - min)).exp();
+    }
+    let weights = &*weights;
     let total: f64 = weights.iter().sum();
     let mean = weights
         .iter()
