@@ -9,10 +9,8 @@
 use crate::calib;
 use crate::ctimport::{self, ImportOptions, output};
 use crate::error::{Error, InputError};
-use crate::geometry::{Affine, Camera};
-use crate::scene::format::{
-    CameraEntry, FORMAT_V1, FramesEntry, InitialPoseEntry, SceneFile, StructureEntry,
-};
+use crate::geometry::Camera;
+use crate::scene::format::{CameraEntry, FORMAT_V1, FramesEntry, SceneFile, StructureEntry};
 use crate::video;
 use std::path::{Path, PathBuf};
 
@@ -79,7 +77,9 @@ impl NewSceneReport {
         format!(
             "new-scene: {} — {} cameras ({}) at {}×{}, {} frames at {:.2} fps; structures: {}\n\
              next: open it with `endofuse open {}`, paint background (key 1) and structure (2, 3, …) \
-             strokes on the first frames (B brush, E eraser), train the forest (T), then track (Ctrl+T){uneven}",
+             strokes on the first frames (B brush, E eraser), train the forest (T), place the model \
+             (Place automatically, or M and drag), then track (Ctrl+T); `endofuse track` places it \
+             automatically{uneven}",
             self.scene_json.display(),
             self.cameras.len(),
             self.cameras.join(", "),
@@ -234,21 +234,6 @@ fn view_of(path: &Path, name: &str, copy: bool) -> Result<View, InputError> {
             "is neither a video (.mp4, .mov, .avi, .mkv, .m4v, .webm) nor a folder of frames",
         ))
     }
-}
-
-/// Places the kidney in front of camera 0 so that it spans about 40 % of the image width.
-fn initial_pose(camera: &Camera, kidney: &crate::geometry::Mesh) -> Affine {
-    let centre = kidney.vertex_mean();
-    let extent = kidney
-        .bounding_box()
-        .map(|(lo, hi)| (hi - lo).max_element())
-        .unwrap_or(100.0);
-    let depth = camera.intrinsics.fx * extent / (0.4 * camera.width as f64);
-    let mut a = Affine::IDENTITY;
-    a.q[9] = -centre.x;
-    a.q[10] = -centre.y;
-    a.q[11] = depth - centre.z;
-    a
 }
 
 /// Builds the scene folder (see the module doc).
@@ -444,13 +429,12 @@ fn assemble(
         move |source| Error::Write { path, source }
     };
     // The anatomy.
-    let (entries, kidney, ct): (Vec<StructureEntry>, _, _) = match &options.anatomy {
+    let (entries, ct): (Vec<StructureEntry>, _) = match &options.anatomy {
         Anatomy::Ct { labels, options: o } => {
             let report = ctimport::read_and_build(labels, o, progress)?;
             progress("writing meshes and the deformation catalog");
             output::write_into(dir, &report, o)?;
-            let kidney = report.structures[0].mesh.clone();
-            (output::structure_entries(&report), kidney, Some(report))
+            (output::structure_entries(&report), Some(report))
         }
         Anatomy::Meshes(src) => {
             let found = output::read_structures_dir(src)?;
@@ -479,7 +463,7 @@ fn assemble(
                     ..s.entry.clone()
                 });
             }
-            (entries, found[0].mesh.clone(), None)
+            (entries, None)
         }
     };
     // The frames.
@@ -502,9 +486,9 @@ fn assemble(
             .map(|(c, (_, v))| CameraEntry::from_camera(c, v.frames.clone()))
             .collect(),
         structures: entries.clone(),
-        initial_pose: Some(InitialPoseEntry {
-            affine: initial_pose(&cameras[0], &kidney).q.to_vec(),
-        }),
+        // No guessed pose: `track` and the app place the model from the images (a pose guessed
+        // without them was polished into a wrong fit that nothing flagged).
+        initial_pose: None,
         seeds: Some("seeds/{camera}/{frame:06}.png".into()),
         ground_truth: None,
         zoom_changes: Vec::new(),

@@ -192,4 +192,22 @@ fn the_new_scene_form_builds_a_scene_from_ct_calibration_and_videos_and_opens_it
     let names: Vec<&str> = scene.structures.iter().map(|s| s.name.as_str()).collect();
     assert_eq!(names, ["kidney", "tumour_exo"]);
     assert!(app.status.error.is_none(), "{:?}", app.status.error);
+    // No guessed pose in the scene: nothing is drawn until the model is placed. Choosing the
+    // Place tool (M) puts it in front of the camera, to be dragged; an undo takes it away.
+    assert!(app.doc.placement.is_none());
+    h.key_press(egui::Key::M);
+    h.run_steps(2);
+    let placed = h
+        .state()
+        .doc
+        .placement
+        .expect("M places the model in front of the camera");
+    assert!(placed.translation_mm().z > 0.0, "{placed:?}");
+    assert!(h.state().doc.state_at(0).is_some());
+    h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::Z);
+    h.run_steps(2);
+    assert!(
+        h.state().doc.placement.is_none(),
+        "Ctrl+Z takes the start away"
+    );
 }

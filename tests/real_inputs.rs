@@ -171,6 +171,9 @@ fn a_patient_ct_a_real_calibration_and_videos_track_like_png_frames() {
             text.contains("next:") && text.contains("endofuse open"),
             "{text}"
         );
+        // No guessed pose: track and the app place the model from the images.
+        let written = common::read_json(&out.join("scene.json"));
+        assert!(written.get("initial_pose").is_none(), "{written}");
         out
     };
     let per_camera = |calib: &Path, name: &str| {

@@ -193,7 +193,10 @@ impl EndofuseApp {
             Action::Export => self.export(ctx),
             Action::Brush => self.view.tool = Tool::Brush,
             Action::Eraser => self.view.tool = Tool::Eraser,
-            Action::Place => self.view.tool = Tool::Place,
+            Action::Place => {
+                self.view.tool = Tool::Place;
+                self.place_in_front_if_nothing_drawn();
+            }
             Action::BrushSmaller => self.resize_brush(0.8),
             Action::BrushBigger => self.resize_brush(1.25),
             Action::Undo => {
@@ -254,6 +257,33 @@ impl EndofuseApp {
             // Panning is a drag with the key held: the views do it.
             Action::Pan => {}
         }
+    }
+
+    /// The Place tool chosen with nothing drawn at this frame (no fit, no placement: a scene
+    /// without `initial_pose`): the model appears in front of the first camera, as an undo step
+    /// of its own, to be dragged onto the organ; the drags had nothing to move before.
+    fn place_in_front_if_nothing_drawn(&mut self) {
+        let frame = self.view.frame;
+        if self.doc.state_at(frame).is_some() {
+            return;
+        }
+        let (Some(scene), Some(model)) = (&self.doc.scene, &self.doc.model) else {
+            return;
+        };
+        let Some(camera) = scene.cameras.first() else {
+            return;
+        };
+        let mean = model.deformed(&vec![0.0; model.shape.mode_count()]);
+        let Some(organ) = mean.get(model.anchor) else {
+            return;
+        };
+        let guess = crate::fit::init::in_front_of_camera(camera, organ);
+        self.doc.place(frame, guess, true);
+        self.screen.textures.forget_overlays();
+        self.status.notify(
+            "The model starts in front of the camera: drag it onto the organ (right- or \
+             Ctrl-drag turns it, the wheel sets its depth), or Place automatically.",
+        );
     }
 
     pub fn resize_brush(&mut self, factor: f32) {

@@ -27,6 +27,31 @@ use glam::{DMat3, DVec2, DVec3};
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
+/// A rough pose to start placing the model by hand: the preoperative orientation unchanged, the
+/// organ's centre on camera 0's axis at the depth where it spans about 40 % of the image's
+/// width. Not a fit: nothing in the images is looked at, so the app shows it as not fitted, and
+/// no scene is written with it as its `initial_pose` (`new-scene` did: a run polished from it
+/// fitted a turned kidney with nothing flagging it, Dice 0.31 where automatic placement gave
+/// 0.97). `vertices` are the organ's, in the preoperative frame.
+pub fn in_front_of_camera(camera: &Camera, vertices: &[DVec3]) -> Affine {
+    let centre = crate::geometry::mesh::vertex_mean(vertices);
+    let (lo, hi) = vertices.iter().fold(
+        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+        |(lo, hi), &v| (lo.min(v), hi.max(v)),
+    );
+    let extent = (hi - lo).max_element();
+    let extent = if extent.is_finite() && extent > 0.0 {
+        extent
+    } else {
+        100.0
+    };
+    let depth = camera.intrinsics.fx * extent / (0.4 * camera.width as f64);
+    Affine::from_linear_translation(
+        DMat3::IDENTITY,
+        DVec3::new(-centre.x, -centre.y, depth - centre.z),
+    )
+}
+
 /// Unit directions spread over the sphere (Fibonacci lattice).
 fn directions(n: usize) -> Vec<DVec3> {
     let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
@@ -375,6 +400,41 @@ impl<'a> Refiner<'a> {
 
 #[cfg(test)]
 mod tests {
+
+    /// The hand placement's start: the organ's centre on camera 0's axis, its projection about
+    /// 40 % of the image wide, the orientation untouched; a degenerate mesh still gives a
+    /// finite pose.
+    #[test]
+    fn in_front_of_camera_centres_the_organ_at_a_fraction_of_the_width() {
+        let scene = crate::synth::memory_scene(&crate::synth::SynthOptions {
+            frames: 1,
+            width: 320,
+            height: 180,
+            ..crate::synth::SynthOptions::default()
+        })
+        .unwrap();
+        let cam = &scene.cameras[0];
+        let mesh = &scene.structures[0].mesh;
+        let a = in_front_of_camera(cam, &mesh.vertices);
+        assert_eq!(a.linear(), DMat3::IDENTITY);
+        let posed: Vec<DVec3> = mesh.vertices.iter().map(|&v| a.apply(v)).collect();
+        let centre = crate::geometry::mesh::vertex_mean(&posed);
+        assert!(centre.x.abs() < 1e-9 && centre.y.abs() < 1e-9 && centre.z > 0.0);
+        let xs: Vec<f64> = posed
+            .iter()
+            .filter_map(|&p| cam.project(p).map(|q| q.x))
+            .collect();
+        let span = xs.iter().cloned().fold(f64::MIN, f64::max)
+            - xs.iter().cloned().fold(f64::MAX, f64::min);
+        let fraction = span / cam.width as f64;
+        assert!(
+            (0.2..=0.45).contains(&fraction),
+            "spans {fraction} of the width"
+        );
+        let flat = in_front_of_camera(cam, &[DVec3::ONE; 3]);
+        assert!(flat.is_finite());
+        assert!(in_front_of_camera(cam, &[]).is_finite());
+    }
     use super::*;
     use crate::geometry::pose::rotation_to_vector;
 

@@ -399,6 +399,11 @@ fn interact(
             }
         }
         Tool::Place => {
+            // Nothing to move yet (the tool was already chosen when the scene came): the
+            // first drag puts the model in front of the camera, as choosing the tool does.
+            if response.drag_started() && shown.doc.state_at(view.frame).is_none() {
+                shown.commands.act(Action::Place);
+            }
             let stroke = &mut screen.stroke;
             if response.dragged() && shown.doc.placement.is_some() {
                 let d = response.drag_delta() / transform.scale(rect, cam_size);
