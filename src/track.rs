@@ -4,12 +4,11 @@
 //! centroid error, camera errors, timing) where ground truth exists.
 
 use crate::appearance::{Appearance, ForestParams};
-use crate::error::{Error, InputError};
+use crate::error::Error;
 use crate::fit::Model;
 use crate::fit::config::{FitConfig, Mode, ResolvedConfig};
 use crate::fit::tracker::{TrackOptions, TrackedFrame, initial_state, track};
 use crate::plane::dice;
-use crate::scene::labels::read_label_png_sized;
 use crate::scene::write::{write_json_atomic, write_labels, write_mask};
 use crate::scene::{Scene, Trajectory, TrajectoryFrame};
 use rayon::prelude::*;
@@ -341,16 +340,8 @@ impl<'a> Recorder<'a> {
                     _ => continue,
                 };
                 if path.exists() {
-                    let (cw, ch) = (masks[c].width, masks[c].height);
-                    let gt = read_label_png_sized(&path, |w, h| {
-                        if (w, h) == (cw, ch) {
-                            return Ok(());
-                        }
-                        Err(InputError::new(
-                            &path,
-                            format!("hidden-structure mask is {w}×{h} but the camera is {cw}×{ch}"),
-                        ))
-                    })?;
+                    let size = (masks[c].width as u32, masks[c].height as u32);
+                    let gt = crate::scene::read_hidden_mask(&path, size)?;
                     if let Some(d) = dice(&masks[c], &gt.map(|&v| v >= 128)) {
                         self.hidden_dice.entry(name.clone()).or_default().push(d);
                     }

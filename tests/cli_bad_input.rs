@@ -299,6 +299,32 @@ fn bad_ground_truth() {
         "gt/hidden/hidden/left/000001.png",
         "cannot decode label image",
     );
+
+    // Values no structure has: scored, they lowered the Dice with nothing saying why.
+    let d = scratch("truth-value");
+    let mut img = image::GrayImage::new(64, 48);
+    img.put_pixel(5, 5, image::Luma([9]));
+    img.save(d.join("gt/left/000001.png")).unwrap();
+    expect_bad(
+        &d,
+        "gt/left/000001.png",
+        "ground-truth value 9 is no structure's label",
+    );
+
+    let d = scratch("truth-seed-background");
+    image::GrayImage::from_pixel(64, 48, image::Luma([255]))
+        .save(d.join("gt/right/000000.png"))
+        .unwrap();
+    expect_bad(&d, "gt/right/000000.png", "ground-truth value 255");
+
+    // A hidden mask is 0/255 (CONTRACT): a 0/1 mask would read as empty.
+    let d = scratch("hidden-mask-value");
+    let mask = d.join("gt/hidden/hidden/left/000001.png");
+    std::fs::create_dir_all(mask.parent().unwrap()).unwrap();
+    let mut img = image::GrayImage::new(64, 48);
+    img.put_pixel(5, 5, image::Luma([1]));
+    img.save(&mask).unwrap();
+    expect_bad(&d, "gt/hidden/hidden/left/000001.png", "mask holds value 1");
 }
 
 #[test]

@@ -393,9 +393,42 @@ impl Scene {
         if !path.exists() {
             return None;
         }
-        Some(labels::read_label_png_sized(&path, |w, h| {
-            self.check_label_size(&path, w, h, c)
-        }))
+        Some(self.read_ground_truth_labels(&path, c))
+    }
+
+    /// A ground-truth label image of camera `c`, its size and values checked.
+    fn read_ground_truth_labels(&self, path: &Path, c: usize) -> Result<LabelImage, InputError> {
+        let img = labels::read_label_png_sized(path, |w, h| self.check_label_size(path, w, h, c))?;
+        self.check_ground_truth_values(path, &img)?;
+        Ok(img)
+    }
+
+    /// Every value of a ground-truth label image is 0 or a structure's label: another value
+    /// (a seed image's 255, a tool's own class numbers) would be scored as a structure missed
+    /// and lower the Dice with nothing saying why.
+    pub fn check_ground_truth_values(
+        &self,
+        path: &Path,
+        img: &LabelImage,
+    ) -> Result<(), InputError> {
+        let seen = values_present(img);
+        let unknown = (1..=255u8)
+            .find(|&v| seen[v as usize] && !self.structures.iter().any(|s| s.label == v));
+        let Some(v) = unknown else {
+            return Ok(());
+        };
+        let labels: Vec<String> = self
+            .structures
+            .iter()
+            .map(|s| format!("{} {}", s.label, s.name))
+            .collect();
+        Err(InputError::new(
+            path,
+            format!(
+                "ground-truth value {v} is no structure's label (0 is background; the scene's labels: {})",
+                labels.join(", ")
+            ),
+        ))
     }
 
     /// Which frames have ground-truth labels for every camera.
@@ -456,24 +489,32 @@ impl Scene {
     /// The ground-truth images of frame `t` in camera `c` that exist as files: the label image
     /// and each hidden structure's mask (none for a scene without a folder).
     fn ground_truth_files(&self, t: usize, c: usize) -> Vec<PathBuf> {
+        let (labels, hidden) = self.ground_truth_paths(t, c);
+        labels.into_iter().chain(hidden).collect()
+    }
+
+    /// [`Scene::ground_truth_files`] apart: the label image, and the hidden structures' masks.
+    fn ground_truth_paths(&self, t: usize, c: usize) -> (Option<PathBuf>, Vec<PathBuf>) {
         let (Some(root), Some(cam)) = (&self.root, self.cameras.get(c)) else {
-            return Vec::new();
+            return (None, Vec::new());
         };
         let gt = &self.ground_truth;
-        let mut paths = Vec::new();
-        if let Some(l) = &gt.labels {
-            paths.push(root.join(l.expand(t, &cam.name, "")));
-        }
+        let labels = gt
+            .labels
+            .as_ref()
+            .map(|l| root.join(l.expand(t, &cam.name, "")))
+            .filter(|p| p.exists());
+        let mut hidden = Vec::new();
         if let Some(h) = &gt.hidden {
-            paths.extend(
+            hidden.extend(
                 self.structures
                     .iter()
                     .filter(|s| !s.visible)
                     .map(|s| root.join(h.expand(t, &cam.name, &s.name))),
             );
         }
-        paths.retain(|p| p.exists());
-        paths
+        hidden.retain(|p| p.exists());
+        (labels, hidden)
     }
 
     /// Every frame file exists and its header gives its camera's size (cheap).
@@ -518,10 +559,13 @@ impl Scene {
         for t in 0..self.frame_count {
             let mut any = false;
             for c in 0..self.cameras.len() {
-                for path in self.ground_truth_files(t, c) {
-                    labels::read_label_png_sized(&path, |w, h| {
-                        self.check_label_size(&path, w, h, c)
-                    })?;
+                let (label_path, hidden_paths) = self.ground_truth_paths(t, c);
+                if let Some(path) = label_path {
+                    self.read_ground_truth_labels(&path, c)?;
+                    any = true;
+                }
+                for path in hidden_paths {
+                    read_hidden_mask(&path, (self.cameras[c].width, self.cameras[c].height))?;
                     any = true;
                 }
             }
@@ -555,10 +599,7 @@ impl Scene {
 
     /// Every seed value is 0, 255 or a visible structure's label.
     pub fn check_seed_values(&self, path: &Path, img: &LabelImage) -> Result<(), InputError> {
-        let mut seen = [false; 256];
-        for &v in &img.data {
-            seen[v as usize] = true;
-        }
+        let seen = values_present(img);
         for v in 1..255u8 {
             if !seen[v as usize] {
                 continue;
@@ -643,4 +684,36 @@ impl Scene {
     pub fn in_zoom_change(&self, t: usize) -> bool {
         self.zoom_changes.iter().any(|&(a, b)| (a..=b).contains(&t))
     }
+}
+
+/// Which of the 256 values occur in `img`.
+fn values_present(img: &LabelImage) -> [bool; 256] {
+    let mut seen = [false; 256];
+    for &v in &img.data {
+        seen[v as usize] = true;
+    }
+    seen
+}
+
+/// A hidden structure's ground-truth mask (CONTRACT: 0 outside, 255 inside), `size` checked.
+/// Any other value is refused: a mask written 0/1 would otherwise read as empty.
+pub fn read_hidden_mask(path: &Path, size: (u32, u32)) -> Result<LabelImage, InputError> {
+    let (cw, ch) = (size.0 as usize, size.1 as usize);
+    let img = labels::read_label_png_sized(path, |w, h| {
+        if (w, h) == (cw, ch) {
+            return Ok(());
+        }
+        Err(InputError::new(
+            path,
+            format!("hidden-structure mask is {w}×{h} but the camera is {cw}×{ch}"),
+        ))
+    })?;
+    let seen = values_present(&img);
+    if let Some(v) = (1..255u8).find(|&v| seen[v as usize]) {
+        return Err(InputError::new(
+            path,
+            format!("hidden-structure mask holds value {v}; a mask is 0 (outside) or 255 (inside)"),
+        ));
+    }
+    Ok(img)
 }
