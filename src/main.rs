@@ -96,10 +96,12 @@ enum Command {
         /// Standard deviation of additive Gaussian noise on intensities in [0, 1].
         #[arg(long, default_value_t = 0.01)]
         noise: f64,
-        #[arg(long, default_value_t = 960)]
-        width: u32,
-        #[arg(long, default_value_t = 540)]
-        height: u32,
+        /// Frame width in px [default: 960, or the --calib file's image size].
+        #[arg(long)]
+        width: Option<u32>,
+        /// Frame height in px [default: 540, or the --calib file's image size].
+        #[arg(long)]
+        height: Option<u32>,
         #[arg(long, default_value_t = 2)]
         views: usize,
         /// No surgical instruments.
@@ -549,14 +551,34 @@ fn run(cli: Cli) -> Result<()> {
             let (cameras, width, height, views) = match &calib {
                 Some(file) => {
                     let cal = endofuse::calib::read(file)?;
-                    let (w, h) = cal.image_size.unwrap_or((width, height));
+                    // A file without an image size (OpenCV's stereo calibration sample writes
+                    // none) rendered at the default 960×540 with its principal point where the
+                    // real image's was: the size must then be given.
+                    let (w, h) = match (cal.image_size, width, height) {
+                        (_, Some(w), Some(h)) => (w, h),
+                        (Some(size), None, None) => size,
+                        (Some(_), _, _) => {
+                            return Err(endofuse::InputError::new(
+                                file,
+                                "give both --width and --height, or neither (the file's image size is used)",
+                            )
+                            .into());
+                        }
+                        (None, _, _) => {
+                            return Err(endofuse::InputError::new(
+                                file,
+                                "gives no image size: give the frames' size the cameras were calibrated at with --width and --height",
+                            )
+                            .into());
+                        }
+                    };
                     let cams = cal
                         .cameras(w, h)
                         .map_err(|e| endofuse::InputError::new(file, e.to_string()))?;
                     let n = cams.len();
                     (Some(cams), w, h, n)
                 }
-                None => (None, width, height, views),
+                None => (None, width.unwrap_or(960), height.unwrap_or(540), views),
             };
             let options = SynthOptions {
                 structures,

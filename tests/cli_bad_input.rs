@@ -446,6 +446,43 @@ fn bad_synth_options_are_refused() {
         .unwrap();
     assert_eq!(run.status.code(), Some(2), "a forest too large to allocate");
     assert!(String::from_utf8_lossy(&run.stderr).contains("--trees"));
+
+    // A calibration without an image size rendered at the default 960×540, its principal point
+    // where the real image's was: the size must be given, and then it is used.
+    let sizeless = out.with_extension("sizeless.yml");
+    let yaml = std::fs::read_to_string(common::fixture().join("../calib/opencv4_stereo.yml"))
+        .unwrap()
+        .replace("imageSize: [ 1280, 1024 ]\n", "");
+    std::fs::write(&sizeless, yaml).unwrap();
+    let synth_with = |extra: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_endofuse"))
+            .args(["synth", "--frames", "1", "--calib"])
+            .arg(&sizeless)
+            .args(extra)
+            .arg("--out")
+            .arg(&out)
+            .output()
+            .unwrap()
+    };
+    let run = synth_with(&[]);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("sizeless.yml") && stderr.contains("gives no image size"),
+        "{stderr}"
+    );
+    assert!(!out.exists(), "nothing written");
+    let run = synth_with(&["--width", "1280", "--height", "1024"]);
+    assert_eq!(
+        run.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let scene = common::read_json(&out.join("scene.json"));
+    assert_eq!(scene["cameras"][0]["width"], 1280);
+    let _ = std::fs::remove_dir_all(&out);
+    let _ = std::fs::remove_file(&sizeless);
 }
 
 /// `synth --out` writes a phantom whole: an earlier phantom there is replaced (none of its
