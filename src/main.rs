@@ -78,8 +78,10 @@ enum Command {
         /// Label numbers, e.g. kidney=1,tumour=2,cyst=3 (KiTS by default).
         #[arg(long = "labels", value_name = "MAP")]
         labels_map: Option<String>,
-        /// Target vertex count of the kidney mesh (tumours get about a quarter).
-        #[arg(long, default_value_t = 5000)]
+        /// Target vertex count of the kidney mesh, 500 to 100000 (tumours get about a
+        /// quarter, at least 100).
+        #[arg(long, default_value_t = 5000,
+              value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(500..=100_000))]
         vertices: usize,
         /// Replace a non-empty output folder.
         #[arg(long)]
@@ -440,8 +442,8 @@ fn run(cli: Cli) -> Result<()> {
                         format!("'{side}' is not left, right or auto"),
                     )
                 })?,
-                kidney_vertices: vertices.max(100),
-                tumour_vertices: (vertices / 4).max(100),
+                kidney_vertices: vertices,
+                tumour_vertices: endofuse::ctimport::ImportOptions::tumour_vertices_for(vertices),
                 force,
                 ..Default::default()
             };

@@ -446,6 +446,14 @@ fn bad_synth_options_are_refused() {
         .unwrap();
     assert_eq!(run.status.code(), Some(2), "a forest too large to allocate");
     assert!(String::from_utf8_lossy(&run.stderr).contains("--trees"));
+    // Ten vertices cannot describe a kidney (they gave 8,614 with no word).
+    let run = Command::new(env!("CARGO_BIN_EXE_endofuse"))
+        .args(["import-ct", "ct.nii.gz", "--vertices", "10", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_eq!(run.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&run.stderr).contains("500..=100000"));
 
     // A calibration without an image size rendered at the default 960×540, its principal point
     // where the real image's was: the size must be given, and then it is used.

@@ -57,6 +57,10 @@ pub enum VolumeError {
         "a voxel step along {axis} of {mm:e} mm: a CT's lie between 0.001 and 100 mm; check the header's units, pixdim and sform/qform"
     )]
     VoxelSize { axis: &'static str, mm: f64 },
+    #[error(
+        "pixdim[{index}] is {value}, and the header gives no sform: the voxels' size is unknown (nifti1_io would take 1 mm and the meshes would come out the wrong size); write the CT with its spacing"
+    )]
+    NoSpacing { index: usize, value: f32 },
     #[error("the volume is empty (a dimension of size 0)")]
     Empty,
     #[error(
@@ -232,7 +236,7 @@ fn from_header_and_voxels(
     let (dims, datatype) = grid(header)?;
     let big = header.endianness == nifti::Endianness::Big;
     let labels = decode_labels(raw, datatype, big, dims.iter().product())?;
-    let (linear, offset_mm, transform) = world_map(header);
+    let (linear, offset_mm, transform) = world_map(header)?;
     let det = linear.determinant();
     if !det.is_finite() || det.abs() < 1e-9 {
         return Err(VolumeError::Transform(det));
@@ -341,7 +345,7 @@ fn unit_mm(xyzt_units: u8) -> f64 {
     }
 }
 
-fn world_map(h: &nifti::NiftiHeader) -> (DMat3, DVec3, WorldTransform) {
+fn world_map(h: &nifti::NiftiHeader) -> Result<(DMat3, DVec3, WorldTransform), VolumeError> {
     let u = unit_mm(h.xyzt_units);
     let finite = |v: &[f32]| v.iter().all(|x| x.is_finite());
     if h.sform_code > 0 && finite(&h.srow_x) && finite(&h.srow_y) && finite(&h.srow_z) {
@@ -354,13 +358,22 @@ fn world_map(h: &nifti::NiftiHeader) -> (DMat3, DVec3, WorldTransform) {
             DVec3::new(x.z, y.z, z.z),
         );
         let offset = DVec3::new(h.srow_x[3] as f64, h.srow_y[3] as f64, h.srow_z[3] as f64) * u;
-        return (linear, offset, WorldTransform::Sform);
+        return Ok((linear, offset, WorldTransform::Sform));
     }
-    let pix = |n: usize| {
+    // The qform and the bare pixdim both scale by pixdim[1..4]. nifti1_io takes 1 mm for a
+    // zero or unreadable one; a CT read so gives meshes of the wrong size with no warning.
+    let mut steps = [0.0; 3];
+    for (n, step) in (1..4).zip(&mut steps) {
         let v = h.pixdim[n].abs() as f64;
-        if v.is_finite() && v > 0.0 { v } else { 1.0 }
-    } * u;
-    let spacing = DMat3::from_diagonal(DVec3::new(pix(1), pix(2), pix(3)));
+        if !(v.is_finite() && v > 0.0) {
+            return Err(VolumeError::NoSpacing {
+                index: n,
+                value: h.pixdim[n],
+            });
+        }
+        *step = v * u;
+    }
+    let spacing = DMat3::from_diagonal(DVec3::from_array(steps));
     if h.qform_code > 0 {
         let (b, c, d) = (h.quatern_b as f64, h.quatern_c as f64, h.quatern_d as f64);
         // As nifti1_io.c's nifti_quatern_to_mat44: where b² + c² + d² reaches 1 (a header
@@ -399,9 +412,9 @@ fn world_map(h: &nifti::NiftiHeader) -> (DMat3, DVec3, WorldTransform) {
         } else {
             DVec3::ZERO
         };
-        return (r * flip * spacing, offset, WorldTransform::Qform);
+        return Ok((r * flip * spacing, offset, WorldTransform::Qform));
     }
-    (spacing, DVec3::ZERO, WorldTransform::Pixdim)
+    Ok((spacing, DVec3::ZERO, WorldTransform::Pixdim))
 }
 
 /// How [`write`] states the voxel-to-world map.
@@ -663,6 +676,45 @@ mod tests {
         .unwrap();
         let err = read(&p).unwrap_err().to_string();
         assert!(err.contains("voxel step along i"), "{err}");
+        // A zero or unreadable pixdim with no sform is an unknown voxel size, not 1 mm (the
+        // qform scales by pixdim as well).
+        for (name, spacing, bad) in [
+            ("zero.nii", [1.0, 0.0, 1.0], "pixdim[2] is 0"),
+            ("nan.nii", [f32::NAN, 1.0, 1.0], "pixdim[1] is NaN"),
+        ] {
+            let p = dir.join(name);
+            write(
+                &p,
+                &vol,
+                WriteTransform::Pixdim {
+                    spacing_mm: spacing,
+                },
+                WriteType::Uint8,
+                false,
+            )
+            .unwrap();
+            let err = read(&p).unwrap_err().to_string();
+            assert!(
+                err.contains(bad) && err.contains("size is unknown"),
+                "{err}"
+            );
+            let p = dir.join(format!("q-{name}"));
+            write(
+                &p,
+                &vol,
+                WriteTransform::Qform {
+                    quaternion_bcd: [0.0; 3],
+                    qfac: 1.0,
+                    spacing_mm: spacing,
+                    offset_mm: [0.0; 3],
+                },
+                WriteType::Uint8,
+                false,
+            )
+            .unwrap();
+            let err = read(&p).unwrap_err().to_string();
+            assert!(err.contains(bad), "{err}");
+        }
         let _ = std::fs::remove_dir_all(&dir);
     }
 
