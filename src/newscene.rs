@@ -11,6 +11,7 @@ use crate::ctimport::{self, ImportOptions, output};
 use crate::error::{Error, InputError};
 use crate::geometry::Camera;
 use crate::scene::format::{CameraEntry, FORMAT_V1, FramesEntry, SceneFile, StructureEntry};
+use crate::scene::template::PathTemplate;
 use crate::video;
 use std::path::{Path, PathBuf};
 
@@ -113,11 +114,15 @@ fn video_view(path: &Path, name: &str, copy: bool) -> Result<View, InputError> {
         .map(|e| e.to_string_lossy().to_string())
         .unwrap_or_else(|| "mp4".into());
     let inside = format!("{name}.{ext}");
+    // scene.json's frame paths are templates: a path's own braces are doubled.
     let (frames, copies) = if copy {
-        (inside.clone(), vec![(path.to_path_buf(), inside)])
+        (
+            PathTemplate::escape(&inside),
+            vec![(path.to_path_buf(), inside)],
+        )
     } else {
         (
-            output::canonical(path).to_string_lossy().to_string(),
+            PathTemplate::escape(&output::canonical(path).to_string_lossy()),
             Vec::new(),
         )
     };
@@ -200,14 +205,22 @@ fn folder_view(dir: &Path, name: &str, copy: bool) -> Result<View, InputError> {
             .enumerate()
             .map(|(t, (_, f))| (dir.join(f), format!("{name}/{t:06}.{ext}")))
             .collect();
-        (format!("{name}/{{frame:06}}.{ext}"), copies)
-    } else {
-        let template = format!("{prefix}{{frame:0{width}}}{suffix}");
         (
-            output::canonical(dir)
-                .join(template)
-                .to_string_lossy()
-                .to_string(),
+            format!("{}/{{frame:06}}.{ext}", PathTemplate::escape(name)),
+            copies,
+        )
+    } else {
+        // The folder's and the names' own braces doubled: only the frame number is a
+        // placeholder (a folder named `br{x}` was read as an unknown one).
+        let template = format!(
+            "{}{{frame:0{width}}}{}",
+            PathTemplate::escape(&prefix),
+            PathTemplate::escape(&suffix)
+        );
+        (
+            PathTemplate::escape(&output::canonical(dir).to_string_lossy())
+                + std::path::MAIN_SEPARATOR_STR
+                + &template,
             Vec::new(),
         )
     };
@@ -266,8 +279,12 @@ pub fn new_scene(
             }
             let v = video_view(path, "stereo", options.copy_frames)?;
             let (l, r) = video::Crop::side_by_side(v.size.0, v.size.1);
+            // The object form's `video` is a plain path, not a template.
             let video = match &v.frames {
-                FramesEntry::Path(p) => p.clone(),
+                FramesEntry::Path(p) => PathTemplate::parse(p)
+                    .ok()
+                    .and_then(|t| t.literal())
+                    .unwrap_or_else(|| p.clone()),
                 FramesEntry::Video { video, .. } => video.clone(),
             };
             let half = |c: video::Crop| View {

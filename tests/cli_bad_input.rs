@@ -556,6 +556,41 @@ fn synth_replaces_an_earlier_phantom_and_refuses_other_folders() {
     let _ = std::fs::remove_dir_all(&base);
 }
 
+/// Frames under a folder whose name has braces: scene.json's frame paths are templates, so
+/// `new-scene` doubles the path's own braces, and the scene opens (the folder `br{x}` was read
+/// as an unknown placeholder, reported against new-scene's hidden staging folder).
+#[test]
+fn braces_in_a_frames_folder_are_part_of_its_path() {
+    let fixture = scratch("braces-src");
+    let root = common::scratch_dir("bad-braces").join("b{r}x {frame}");
+    common::copy_dir(&fixture, &root);
+    let out = root.parent().unwrap().join("scene");
+    let run = Command::new(env!("CARGO_BIN_EXE_endofuse"))
+        .arg("new-scene")
+        .arg("--out")
+        .arg(&out)
+        .arg("--calib")
+        .arg(root.join("scene.json"))
+        .arg("--meshes")
+        .arg(root.join("meshes"))
+        .arg("--view")
+        .arg(format!("left={}", root.join("left").display()))
+        .arg("--view")
+        .arg(format!("right={}", root.join("right").display()))
+        .env_remove("RUST_LOG")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(0), "{stderr}");
+    let scene = common::read_json(&out.join("scene.json"));
+    let frames = scene["cameras"][0]["frames"].as_str().unwrap().to_string();
+    assert!(frames.contains("b{{r}}x {{frame}}"), "{frames}");
+    let (code, stderr) = info(&out);
+    assert_eq!(code, 0, "{stderr}");
+    let _ = std::fs::remove_dir_all(&fixture);
+    let _ = std::fs::remove_dir_all(root.parent().unwrap());
+}
+
 /// A doubtful input that is not an error (a baseline of 5 µm: the calibration is in metres)
 /// is said by default, as one `warning:` line naming the value, and the command goes on.
 #[test]

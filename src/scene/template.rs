@@ -1,5 +1,7 @@
 //! Path templates of scene.json: `{frame}`, `{frame:06}` (zero-padded width), `{camera}` and
-//! `{structure}`. Parsed once, so a typo is reported at load time, not mid-run.
+//! `{structure}`; `{{` and `}}` stand for a literal brace (a folder named `br{x}`), as in
+//! Python's and Rust's format strings. Parsed once, so a typo is reported at load time, not
+//! mid-run.
 
 #[derive(Debug, Clone, PartialEq, Eq)]
 enum Piece {
@@ -37,20 +39,28 @@ pub struct PathTemplate {
 impl PathTemplate {
     pub fn parse(source: &str) -> Result<Self, TemplateError> {
         let mut pieces = Vec::new();
+        let mut text = String::new();
         let mut rest = source;
-        while let Some(open) = rest.find('{') {
-            if open > 0 {
-                pieces.push(Piece::Text(rest[..open].to_string()));
+        while let Some(at) = rest.find(['{', '}']) {
+            text.push_str(&rest[..at]);
+            let tail = &rest[at..];
+            // Doubled braces are literal ones; a lone `}` is kept as text, as it always was.
+            if tail.starts_with("{{") || tail.starts_with("}}") {
+                text.push_str(&tail[..1]);
+                rest = &tail[2..];
+                continue;
             }
-            let close = rest[open..]
-                .find('}')
-                .ok_or_else(|| TemplateError::Unclosed {
-                    template: source.to_string(),
-                })?
-                + open;
-            let inner = &rest[open + 1..close];
+            if tail.starts_with('}') {
+                text.push('}');
+                rest = &tail[1..];
+                continue;
+            }
+            let close = tail.find('}').ok_or_else(|| TemplateError::Unclosed {
+                template: source.to_string(),
+            })?;
+            let inner = &tail[1..close];
             let (name, spec) = inner.split_once(':').unwrap_or((inner, ""));
-            pieces.push(match name {
+            let piece = match name {
                 "frame" => {
                     let width = if spec.is_empty() {
                         0
@@ -74,16 +84,34 @@ impl PathTemplate {
                         placeholder: inner.to_string(),
                     });
                 }
-            });
-            rest = &rest[close + 1..];
+            };
+            if !text.is_empty() {
+                pieces.push(Piece::Text(std::mem::take(&mut text)));
+            }
+            pieces.push(piece);
+            rest = &tail[close + 1..];
         }
-        if !rest.is_empty() {
-            pieces.push(Piece::Text(rest.to_string()));
+        text.push_str(rest);
+        if !text.is_empty() {
+            pieces.push(Piece::Text(text));
         }
         Ok(Self {
             source: source.to_string(),
             pieces,
         })
+    }
+
+    /// `text` as a template that expands to itself: its braces doubled.
+    pub fn escape(text: &str) -> String {
+        text.replace('{', "{{").replace('}', "}}")
+    }
+
+    /// What a template without placeholders stands for (its braces undoubled): a video's path.
+    pub fn literal(&self) -> Option<String> {
+        self.pieces
+            .iter()
+            .all(|p| matches!(p, Piece::Text(_)))
+            .then(|| self.expand(0, "", ""))
     }
 
     pub fn uses_frame(&self) -> bool {
@@ -111,6 +139,28 @@ impl PathTemplate {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Doubled braces are literal ones, in text and around placeholders; `escape` makes any
+    /// text a template of itself; `literal` undoes it where no placeholder is left.
+    #[test]
+    fn doubled_braces_are_literal() {
+        let t = PathTemplate::parse("/v/br{{x}}/{camera}_{{{frame:03}}}}.png").unwrap();
+        assert_eq!(t.expand(7, "left", ""), "/v/br{x}/left_{007}}.png");
+        assert!(t.uses_frame());
+        for text in ["/tmp/br{x}/a.mp4", "{frame}", "}{", "plain/left.mp4", ""] {
+            let escaped = PathTemplate::escape(text);
+            let t = PathTemplate::parse(&escaped).unwrap();
+            assert!(!t.uses_frame(), "{escaped}");
+            assert_eq!(t.literal().as_deref(), Some(text));
+            assert_eq!(t.expand(3, "c", "s"), text);
+        }
+        let dir = PathTemplate::escape("/tmp/br{x}");
+        let t = PathTemplate::parse(&format!("{dir}/L/{{frame:06}}.png")).unwrap();
+        assert_eq!(t.expand(12, "", ""), "/tmp/br{x}/L/000012.png");
+        assert_eq!(t.literal(), None);
+        assert!(PathTemplate::parse("a/{x}").is_err());
+        assert!(PathTemplate::parse("a/{frame").is_err());
+    }
 
     #[test]
     fn expands_and_rejects() {

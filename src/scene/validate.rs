@@ -161,11 +161,12 @@ pub(super) fn validate_camera(
             let template = PathTemplate::parse(p).map_err(|e| bad(CameraProblem::Frames(e)))?;
             if template.uses_frame() {
                 FramesSpec::Sequence(template)
-            } else if crate::video::is_video_path(Path::new(p)) {
-                FramesSpec::Video {
-                    path: p.clone(),
-                    crop: None,
-                }
+            } else if let Some(path) = template
+                .literal()
+                .filter(|path| crate::video::is_video_path(Path::new(path)))
+            {
+                // Its braces undoubled (a video under a folder named `br{x}`).
+                FramesSpec::Video { path, crop: None }
             } else {
                 return Err(bad(CameraProblem::NoFramePlaceholder {
                     template: p.clone(),
