@@ -292,8 +292,16 @@ pub fn read_structures_dir(dir: &Path) -> Result<Vec<FolderStructure>, InputErro
             stem == "kidney" || stem.starts_with("tumour_exo") || stem.starts_with("tumour_endo")
         })
         .collect();
-    // Kidney first, then the tumours by name.
-    found.sort_by_key(|(stem, _)| (stem != "kidney", stem.clone()));
+    // Kidney first, then the visible tumours, then the hidden ones, each by name: labels 1, 2, 3
+    // for kidney, tumour_exo and tumour_endo, as `synth` and CONTRACT's example number them
+    // (by name alone tumour_endo came second, and synth's seeds were then refused).
+    found.sort_by_key(|(stem, _)| {
+        (
+            stem != "kidney",
+            !stem.starts_with("tumour_exo"),
+            stem.clone(),
+        )
+    });
     if found.first().is_none_or(|(s, _)| s != "kidney") {
         return Err(InputError::new(
             &base,
@@ -327,4 +335,44 @@ pub fn read_structures_dir(dir: &Path) -> Result<Vec<FolderStructure>, InputErro
         });
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A meshes folder without structures.json is numbered kidney 1, visible tumours next,
+    /// hidden ones last (as synth and CONTRACT's example: tumour_exo 2, tumour_endo 3), and
+    /// only tumour_endo* are hidden.
+    #[test]
+    fn a_plain_meshes_folder_numbers_kidney_visible_then_hidden_tumours() {
+        let dir =
+            std::env::temp_dir().join(format!("endofuse-plain-meshes-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let mesh = crate::geometry::mesh::icosphere(1);
+        for name in [
+            "tumour_endo",
+            "tumour_exo_2",
+            "kidney",
+            "tumour_exo",
+            "notes",
+        ] {
+            crate::geometry::mesh_io::write_obj(&dir.join(format!("{name}.obj")), &mesh).unwrap();
+        }
+        let found = read_structures_dir(&dir).unwrap();
+        let order: Vec<(&str, i64, bool)> = found
+            .iter()
+            .map(|s| (s.entry.name.as_str(), s.entry.label, s.entry.visible))
+            .collect();
+        assert_eq!(
+            order,
+            [
+                ("kidney", 1, true),
+                ("tumour_exo", 2, true),
+                ("tumour_exo_2", 3, true),
+                ("tumour_endo", 4, false),
+            ]
+        );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }
