@@ -299,6 +299,7 @@ fn sample() -> Calibration {
                 },
             },
         ],
+        warnings: Vec::new(),
     }
 }
 

@@ -626,6 +626,10 @@ fn doubtful_inputs_warn_on_stderr_by_default() {
         warnings[0].contains("translation") && warnings[0].contains("0.005"),
         "{stderr}"
     );
+    assert!(
+        warnings[0].contains(&dir.join("scene.json").display().to_string()),
+        "the warning names the file: {stderr}"
+    );
     assert!(out.join("scene.json").exists());
     let _ = std::fs::remove_dir_all(&dir);
     let _ = std::fs::remove_dir_all(out.parent().unwrap());

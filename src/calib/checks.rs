@@ -137,15 +137,15 @@ pub(crate) fn rotation(key: &str, r: DMat3) -> Result<DMat3, CalibError> {
     Ok(r)
 }
 
-/// Warns (does not refuse) when a baseline is not a few millimetres: the file may be in metres
-/// or centimetres, and the fused overlay would then sit at the wrong depth.
-pub(crate) fn warn_baseline(key: &str, t: DVec3) {
+/// The warning (not a refusal) for a baseline that is not a few millimetres: the file may be in
+/// metres or centimetres, and the fused overlay would then sit at the wrong depth.
+pub(crate) fn baseline_warning(key: &str, t: DVec3) -> Option<String> {
     let b = t.length();
-    if !(0.5..=200.0).contains(&b) {
-        log::warn!(
+    (!(0.5..=200.0).contains(&b)).then(|| {
+        format!(
             "{key}: baseline |T| = {b} is outside 0.5–200; millimetres are expected (is the file in metres or centimetres?)"
-        );
-    }
+        )
+    })
 }
 
 /// An image size in pixels: a whole number in 1..=100000.
@@ -183,6 +183,7 @@ pub(crate) fn rig(
         format,
         image_size,
         cameras,
+        warnings: Vec::new(),
     }
 }
 

@@ -29,6 +29,8 @@ struct Value<'a> {
 
 struct Keys<'a> {
     values: Vec<(&'a str, Value<'a>)>,
+    /// Lines (1-based) that are not `Key: numbers`.
+    skipped: Vec<usize>,
 }
 
 impl Keys<'_> {
@@ -100,13 +102,7 @@ fn keys(text: &str) -> Result<Keys<'_>, CalibError> {
         }
         values.push((key, Value { line, text }));
     }
-    if !skipped.is_empty() {
-        log::warn!(
-            "camera_calibration.txt: skipped {} line(s) that are not `Key: numbers` (lines {skipped:?})",
-            skipped.len()
-        );
-    }
-    Ok(Keys { values })
+    Ok(Keys { values, skipped })
 }
 
 fn camera(keys: &Keys, n: usize) -> Result<Intrinsics, CalibError> {
@@ -170,17 +166,26 @@ pub(crate) fn parse(text: &str) -> Result<Calibration, CalibError> {
         rotation_from_vector(DVec3::from_slice(&omega)),
     )?;
     let translation_mm = DVec3::from_slice(&t);
-    checks::warn_baseline("Extrinsic-T", translation_mm);
     let extrinsics = Extrinsics {
         rotation,
         translation_mm,
     };
-    Ok(checks::rig(
+    let mut cal = checks::rig(
         CalibFormat::EndoVisText,
         image_size,
         left,
         Some((right, extrinsics)),
-    ))
+    );
+    if !keys.skipped.is_empty() {
+        cal.warnings.push(format!(
+            "skipped {} line(s) that are not `Key: numbers` (lines {:?})",
+            keys.skipped.len(),
+            keys.skipped
+        ));
+    }
+    cal.warnings
+        .extend(checks::baseline_warning("Extrinsic-T", translation_mm));
+    Ok(cal)
 }
 
 fn missing(key: &str, purpose: &str) -> CalibError {
@@ -271,6 +276,14 @@ mod tests {
         let e = cal.cameras[1].extrinsics;
         assert_eq!(e.translation_mm, DVec3::new(-5.0, 0.0, 0.0));
         assert!(e.center_mm().x > 4.9, "right camera at +x of the left one");
+        assert!(cal.warnings.is_empty(), "{:?}", cal.warnings);
+        // Lines that are not keys and a baseline in metres are warnings the reader says with
+        // the file's name (they named a file `camera_calibration.txt` whatever it was called).
+        let odd = PAIR.replace("Extrinsic-T: -5 0 0", "Extrinsic-T: -0.005 0 0\nb'\\x00'");
+        let cal = parse(&odd).unwrap();
+        assert_eq!(cal.warnings.len(), 2, "{:?}", cal.warnings);
+        assert!(cal.warnings[0].starts_with("skipped 1 line(s)"));
+        assert!(cal.warnings[1].starts_with("Extrinsic-T: baseline"));
     }
 
     #[test]

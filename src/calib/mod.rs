@@ -63,6 +63,9 @@ pub struct Calibration {
     pub image_size: Option<(u32, u32)>,
     /// 2 for a stereo file, 1 for a monocular one; index 0 = left/reference.
     pub cameras: Vec<CalibCamera>,
+    /// What was doubtful but not wrong (lines skipped, a baseline not in millimetres), each
+    /// without the file's name: [`read`] says them as warnings naming the file.
+    pub warnings: Vec<String>,
 }
 
 /// What is wrong with a calibration file, with the key and the values at fault.
@@ -234,7 +237,11 @@ pub fn read(path: &Path) -> Result<Calibration, InputError> {
     let extension = path.extension().and_then(|e| e.to_str());
     let text = text_of(&bytes).map_err(|e| fail(e.to_string()))?;
     let format = detect(text, extension).map_err(|e| fail(e.to_string()))?;
-    parse_as(format, text).map_err(|e| fail(format!("{format}: {e}")))
+    let cal = parse_as(format, text).map_err(|e| fail(format!("{format}: {e}")))?;
+    for w in &cal.warnings {
+        log::warn!("{}: {w}", path.display());
+    }
+    Ok(cal)
 }
 
 /// Parses the bytes of a calibration file; `extension` (without the dot) only breaks ties the

@@ -284,17 +284,14 @@ pub(crate) fn to_calibration(st: &Storage, format: CalibFormat) -> Result<Calibr
         });
     };
     let translation_mm = DVec3::new(tx, ty, tz);
-    checks::warn_baseline(&t.key, translation_mm);
     let extrinsics = Extrinsics {
         rotation,
         translation_mm,
     };
-    Ok(checks::rig(
-        format,
-        image_size,
-        left,
-        Some((right, extrinsics)),
-    ))
+    let mut cal = checks::rig(format, image_size, left, Some((right, extrinsics)));
+    cal.warnings
+        .extend(checks::baseline_warning(&t.key, translation_mm));
+    Ok(cal)
 }
 
 /// A matrix to write: key, rows, cols, row-major numbers.

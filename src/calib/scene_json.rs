@@ -115,6 +115,7 @@ pub(crate) fn parse(text: &str) -> Result<Calibration, CalibError> {
             "scene.json: camera 0 is not at the origin; cameras re-expressed relative to it"
         );
     }
+    let mut warnings = Vec::new();
     for (i, c) in cameras.iter_mut().enumerate() {
         c.extrinsics = if i == 0 {
             Extrinsics::default()
@@ -122,10 +123,10 @@ pub(crate) fn parse(text: &str) -> Result<Calibration, CalibError> {
             checks::relative_to(&first, &c.extrinsics)
         };
         if i > 0 {
-            checks::warn_baseline(
+            warnings.extend(checks::baseline_warning(
                 &format!("cameras[{i}].translation"),
                 c.extrinsics.translation_mm,
-            );
+            ));
         }
     }
     if let Some(i) = sizes.iter().position(|s| *s != sizes[0]) {
@@ -142,6 +143,7 @@ pub(crate) fn parse(text: &str) -> Result<Calibration, CalibError> {
         format: CalibFormat::SceneJson,
         image_size: sizes.first().copied(),
         cameras,
+        warnings,
     })
 }
 

@@ -653,8 +653,11 @@ impl Scene {
                 let text = crate::error::read_text(&path).map_err(|e| {
                     InputError::new(&path, format!("cannot read ground-truth trajectory: {e}"))
                 })?;
-                let traj: Trajectory = serde_json::from_str(&text)
+                let (traj, ignored) = Trajectory::from_json(&text)
                     .map_err(|e| InputError::new(&path, format!("malformed trajectory: {e}")))?;
+                if let Some(note) = ignored {
+                    log::warn!("{}: {note}", path.display());
+                }
                 traj.validate(self.frame_count, self.cameras.len())
                     .map_err(|e| InputError::new(&path, e.to_string()))?;
                 Some(traj)

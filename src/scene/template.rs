@@ -50,9 +50,9 @@ impl PathTemplate {
                 rest = &tail[2..];
                 continue;
             }
-            if tail.starts_with('}') {
+            if let Some(after) = tail.strip_prefix('}') {
                 text.push('}');
-                rest = &tail[1..];
+                rest = after;
                 continue;
             }
             let close = tail.find('}').ok_or_else(|| TemplateError::Unclosed {

@@ -46,7 +46,7 @@ pub struct TrajectoryFrame {
     #[serde(
         default,
         skip_serializing_if = "BTreeMap::is_empty",
-        deserialize_with = "lenient"
+        deserialize_with = "lenient::shape"
     )]
     pub shape: BTreeMap<String, Vec<f64>>,
     #[serde(default)]
@@ -57,31 +57,31 @@ pub struct TrajectoryFrame {
     #[serde(
         default,
         skip_serializing_if = "Option::is_none",
-        deserialize_with = "lenient"
+        deserialize_with = "lenient::energy"
     )]
     pub energy: Option<f64>,
     #[serde(
         default,
         skip_serializing_if = "Option::is_none",
-        deserialize_with = "lenient"
+        deserialize_with = "lenient::iterations"
     )]
     pub iterations: Option<u32>,
     #[serde(
         default,
         skip_serializing_if = "Option::is_none",
-        deserialize_with = "lenient"
+        deserialize_with = "lenient::ms"
     )]
     pub ms: Option<f64>,
     #[serde(
         default,
         skip_serializing_if = "Option::is_none",
-        deserialize_with = "lenient"
+        deserialize_with = "lenient::confidence"
     )]
     pub confidence: Option<f64>,
     #[serde(
         default,
         skip_serializing_if = "Option::is_none",
-        deserialize_with = "lenient"
+        deserialize_with = "lenient::lost"
     )]
     pub lost: Option<bool>,
     /// What the tracker knows may be wrong in this frame although it looks right (an
@@ -91,7 +91,7 @@ pub struct TrajectoryFrame {
     #[serde(
         default,
         skip_serializing_if = "Vec::is_empty",
-        deserialize_with = "lenient"
+        deserialize_with = "lenient::warnings"
     )]
     pub warnings: Vec<String>,
     /// Where each hidden structure could be (CONTRACT §3): its centroid's covariance under the
@@ -99,7 +99,7 @@ pub struct TrajectoryFrame {
     #[serde(
         default,
         skip_serializing_if = "BTreeMap::is_empty",
-        deserialize_with = "lenient"
+        deserialize_with = "lenient::hidden_region"
     )]
     pub hidden_region: BTreeMap<String, HiddenRegionEntry>,
 }
@@ -153,21 +153,75 @@ pub fn known_warning(w: &str) -> Option<&'static str> {
         .find(|k| *k == w)
 }
 
-/// Reads a value of the expected type, or its default when the file gives something else
-/// under the key (CONTRACT §3: readers ignore what they do not know, whatever its type).
-fn lenient<'de, D, T>(d: D) -> Result<T, D::Error>
-where
-    D: serde::Deserializer<'de>,
-    T: serde::de::DeserializeOwned + Default,
-{
-    let value = serde_json::Value::deserialize(d)?;
-    Ok(serde_json::from_value(value).unwrap_or_else(|e| {
-        log::warn!("trajectory: ignoring a value of another tool's type ({e})");
-        T::default()
-    }))
+/// Reading a value of the expected type, or its default when the file gives something else
+/// under the key (CONTRACT §3: readers ignore what they do not know, whatever its type); what
+/// was ignored is counted per key, so that [`Trajectory::from_json`] says it once, not once per
+/// frame with neither the file nor the key.
+mod lenient {
+    use serde::Deserialize;
+    use std::cell::RefCell;
+    use std::collections::BTreeMap;
+
+    thread_local! {
+        /// Key → (values ignored, the first one's reason), while a trajectory is read.
+        pub(super) static IGNORED: RefCell<BTreeMap<&'static str, (usize, String)>> =
+            const { RefCell::new(BTreeMap::new()) };
+    }
+
+    fn read<'de, D, T>(d: D, key: &'static str) -> Result<T, D::Error>
+    where
+        D: serde::Deserializer<'de>,
+        T: serde::de::DeserializeOwned + Default,
+    {
+        let value = serde_json::Value::deserialize(d)?;
+        Ok(serde_json::from_value(value).unwrap_or_else(|e| {
+            IGNORED.with_borrow_mut(|ignored| {
+                ignored.entry(key).or_insert((0, e.to_string())).0 += 1;
+            });
+            T::default()
+        }))
+    }
+
+    macro_rules! keys {
+        ($($key:ident),*) => {$(
+            pub(super) fn $key<'de, D, T>(d: D) -> Result<T, D::Error>
+            where
+                D: serde::Deserializer<'de>,
+                T: serde::de::DeserializeOwned + Default,
+            {
+                read(d, stringify!($key))
+            }
+        )*};
+    }
+    keys!(
+        shape,
+        energy,
+        iterations,
+        ms,
+        confidence,
+        lost,
+        warnings,
+        hidden_region
+    );
 }
 
 impl Trajectory {
+    /// Parses a trajectory.json; the second value says, when some were, which values of
+    /// another tool's type were ignored (per key: how many, and why the first was).
+    pub fn from_json(text: &str) -> Result<(Self, Option<String>), serde_json::Error> {
+        lenient::IGNORED.with_borrow_mut(|i| i.clear());
+        let parsed = serde_json::from_str::<Self>(text);
+        let ignored = lenient::IGNORED.with_borrow_mut(std::mem::take);
+        let note = (!ignored.is_empty()).then(|| {
+            let keys: Vec<String> = ignored
+                .iter()
+                .map(|(key, (n, first))| format!("{n} under '{key}' ({first})"))
+                .collect();
+            format!("ignored values of another tool's type: {}", keys.join("; "))
+        });
+        Ok((parsed?, note))
+    }
+
     /// Checks what later stages rely on; the error names the frame entry.
     pub fn validate(&self, frame_count: usize, camera_count: usize) -> Result<(), TrajectoryError> {
         for (entry, f) in self.frames.iter().enumerate() {
@@ -199,5 +253,38 @@ impl Trajectory {
 
     pub fn get(&self, frame: usize) -> Option<&TrajectoryFrame> {
         self.frames.iter().find(|f| f.frame as usize == frame)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Another tool's values under known keys are ignored (CONTRACT §3) and counted per key
+    /// for one note; a clean file gives none; a value of the wrong type where nothing can
+    /// stand in (the affine) is still an error.
+    #[test]
+    fn values_of_another_type_are_ignored_and_counted_once() {
+        let frame = |t: u32, extra: &str| {
+            format!(r#"{{"frame": {t}, "affine": [1,0,0,0,1,0,0,0,1,0,0,150]{extra}}}"#)
+        };
+        let text = format!(
+            r#"{{"frames": [{}, {}, {}]}}"#,
+            frame(0, r#", "shape": "catalog-7", "tools": [1, 2]"#),
+            frame(1, r#", "shape": {"kidney": "x"}, "lost": "no""#),
+            frame(2, ""),
+        );
+        let (traj, note) = Trajectory::from_json(&text).unwrap();
+        assert_eq!(traj.frames.len(), 3);
+        assert!(traj.frames[0].shape.is_empty() && traj.frames[1].lost.is_none());
+        let note = note.unwrap();
+        assert!(
+            note.contains("2 under 'shape'") && note.contains("1 under 'lost'"),
+            "{note}"
+        );
+        let (_, clean) =
+            Trajectory::from_json(&format!(r#"{{"frames": [{}]}}"#, frame(0, ""))).unwrap();
+        assert_eq!(clean, None, "the count starts afresh per file");
+        assert!(Trajectory::from_json(r#"{"frames": [{"frame": 0, "affine": "I"}]}"#).is_err());
     }
 }
