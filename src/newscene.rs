@@ -60,16 +60,32 @@ pub struct NewSceneReport {
     pub ct: Option<ctimport::ImportReport>,
     /// The views' frame counts when they differ (the scene takes the shortest).
     pub uneven_views: Option<String>,
+    /// What the user should check though nothing was wrong (an odd-width side-by-side video).
+    pub notes: Vec<String>,
 }
 
 impl NewSceneReport {
+    /// What the user should check: views of different lengths, then the other notes.
+    pub fn all_notes(&self) -> Vec<String> {
+        let uneven = self.uneven_views.as_ref().map(|c| {
+            format!(
+                "the views have different frame counts ({c}); the scene uses the first {}",
+                self.frame_count
+            )
+        });
+        uneven
+            .into_iter()
+            .chain(self.notes.iter().cloned())
+            .collect()
+    }
+
     /// What the user does next.
     pub fn next_steps(&self) -> String {
-        let uneven = self
-            .uneven_views
-            .as_ref()
-            .map(|c| format!("\nnote: the views have different frame counts ({c}); the scene uses the first {}", self.frame_count))
-            .unwrap_or_default();
+        let uneven: String = self
+            .all_notes()
+            .iter()
+            .map(|n| format!("\nnote: {n}"))
+            .collect();
         let structures: Vec<String> = self
             .structures
             .iter()
@@ -265,6 +281,7 @@ pub fn new_scene(
     let calibration = calib::read(&options.calib)?;
     progress("reading the views");
     let names: Vec<String> = calibration.cameras.iter().map(|c| c.name.clone()).collect();
+    let mut notes = Vec::new();
     let views: Vec<(String, View)> = match &options.views {
         Views::SideBySide(path) => {
             if names.len() != 2 {
@@ -279,6 +296,16 @@ pub fn new_scene(
             }
             let v = video_view(path, "stereo", options.copy_frames)?;
             let (l, r) = video::Crop::side_by_side(v.size.0, v.size.1);
+            if v.size.0 % 2 == 1 {
+                notes.push(format!(
+                    "{} is {} px wide, an odd width: the views are x 0–{} and {}–{}, the middle column left out of both; check that the right view starts where the recording's does (a column off is a pixel of disparity)",
+                    path.display(),
+                    v.size.0,
+                    l.width - 1,
+                    r.x,
+                    r.x + r.width - 1
+                ));
+            }
             // The object form's `video` is a plain path, not a template.
             let video = match &v.frames {
                 FramesEntry::Path(p) => PathTemplate::parse(p)
@@ -420,6 +447,7 @@ pub fn new_scene(
         structures,
         ct,
         uneven_views: uneven.then(|| counts.join(", ")),
+        notes,
     })
 }
 

@@ -107,9 +107,11 @@ pub enum Event {
         task: Task,
         what: String,
     },
-    /// A new scene folder is ready at `scene_json`.
+    /// A new scene folder is ready at `scene_json`; `notes` are what the user should check
+    /// (views of different lengths, an odd-width side-by-side video).
     SceneCreated {
         scene_json: std::path::PathBuf,
+        notes: Vec<String>,
     },
     Finished(Task),
     Cancelled(Task),
@@ -472,6 +474,7 @@ fn run(
             emit(
                 out,
                 Event::SceneCreated {
+                    notes: report.all_notes(),
                     scene_json: report.scene_json,
                 },
             )?;

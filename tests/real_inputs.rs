@@ -195,6 +195,33 @@ fn a_patient_ct_a_real_calibration_and_videos_track_like_png_frames() {
         &yaml,
         vec!["--side-by-side".into(), sbs.to_string_lossy().to_string()],
     );
+    // An odd-width recording splits with its middle column left out, and says so.
+    let odd = dir.join("stereo-odd.mkv");
+    ffmpeg(&[
+        "-i",
+        sbs.to_str().unwrap(),
+        "-vf",
+        "pad=iw+1:ih",
+        "-c:v",
+        "ffv1",
+        odd.to_str().unwrap(),
+    ]);
+    let printed = common::run_ok(&[
+        "new-scene".as_ref(),
+        "--out".as_ref(),
+        dir.join("scene-odd").as_os_str(),
+        "--calib".as_ref(),
+        yaml.as_os_str(),
+        "--meshes".as_ref(),
+        from_yaml.as_os_str(),
+        "--side-by-side".as_ref(),
+        odd.as_os_str(),
+    ]);
+    let text = String::from_utf8_lossy(&printed.stdout);
+    assert!(
+        text.contains("note: ") && text.contains("an odd width") && text.contains("middle column"),
+        "{text}"
+    );
 
     // Frame i read from a video, reached in any order, is the PNG's frame i.
     for s in [&from_yaml, &side_by_side] {

@@ -572,10 +572,12 @@ impl EndofuseApp {
                     b.what = what;
                 }
             }
-            Event::SceneCreated { scene_json } => {
+            Event::SceneCreated { scene_json, notes } => {
                 self.screen.new_scene = None;
+                let notes: String = notes.iter().map(|n| format!(" Note: {n}.")).collect();
                 self.status.notify(format!(
-                    "Created {}: paint seeds on the first frames, train (T), then track (Ctrl+T).",
+                    "Created {}: paint seeds on the first frames, train (T), place the model \
+                     (Place automatically, or M), then track (Ctrl+T).{notes}",
                     scene_json.display()
                 ));
                 self.open_scene_asking(&scene_json.display().to_string());
