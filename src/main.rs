@@ -148,6 +148,7 @@ enum Command {
         seed: u64,
     },
     /// Assemble a scene folder from a patient's calibration, CT labels or meshes, and videos.
+    #[command(group(clap::ArgGroup::new("anatomy").required(true).args(["ct", "meshes"])))]
     NewScene {
         #[arg(long)]
         out: PathBuf,
@@ -156,7 +157,7 @@ enum Command {
         #[arg(long)]
         calib: PathBuf,
         /// CT label volume (NIfTI), meshed as `import-ct` does.
-        #[arg(long, conflicts_with = "meshes", required_unless_present = "meshes")]
+        #[arg(long)]
         ct: Option<PathBuf>,
         /// A folder of meshes (import-ct output, or kidney.obj, tumour_exo*.obj, tumour_endo*.obj).
         #[arg(long)]

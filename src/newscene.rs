@@ -105,7 +105,14 @@ impl NewSceneReport {
             self.frame_count,
             self.fps,
             structures.join(", "),
-            self.scene_json.parent().unwrap_or(Path::new(".")).display()
+            shell_quoted(
+                &self
+                    .scene_json
+                    .parent()
+                    .unwrap_or(Path::new("."))
+                    .display()
+                    .to_string()
+            )
         )
     }
 }
@@ -120,6 +127,20 @@ struct View {
     fps: Option<f64>,
     /// What to copy when `copy_frames`: (source, path inside the scene).
     copies: Vec<(PathBuf, String)>,
+}
+
+/// `text` as one word for a POSIX shell: as it is when it needs no quoting, else in single
+/// quotes (a folder "dir with space" made the printed next step two arguments).
+fn shell_quoted(text: &str) -> String {
+    let plain = !text.is_empty()
+        && text
+            .chars()
+            .all(|c| c.is_alphanumeric() || "/._-+:,@%=".contains(c));
+    if plain {
+        text.to_string()
+    } else {
+        format!("'{}'", text.replace('\'', "'\\''"))
+    }
 }
 
 /// A video file: probed; with `copy`, it will be copied as `NAME.ext` in the scene.
@@ -571,4 +592,19 @@ fn copy_dir(from: &Path, to: &Path) -> Result<(), Error> {
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::shell_quoted;
+
+    /// The printed next step is one shell word whatever the folder's name.
+    #[test]
+    fn paths_are_quoted_for_the_shell_when_they_need_it() {
+        assert_eq!(shell_quoted("/tmp/case-3/scene_a"), "/tmp/case-3/scene_a");
+        assert_eq!(shell_quoted("/tmp/dir with space"), "'/tmp/dir with space'");
+        assert_eq!(shell_quoted("/tmp/it's"), "'/tmp/it'\\''s'");
+        assert_eq!(shell_quoted("/tmp/$HOME`x`"), "'/tmp/$HOME`x`'");
+        assert_eq!(shell_quoted(""), "''");
+    }
 }

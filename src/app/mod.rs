@@ -218,5 +218,48 @@ pub fn run_native(scene: &str) -> anyhow::Result<()> {
         options,
         Box::new(move |cc| Ok(Box::new(EndofuseApp::new(cc, &scene, Box::new(RfdDialogs))))),
     )
-    .map_err(|e| anyhow::anyhow!("cannot open the window: {e}"))
+    .map_err(|e| anyhow::anyhow!("cannot open the window: {}", window_error(&e.to_string())))
+}
+
+/// A window error in the user's terms: winit's says where in its own source it failed
+/// ("os error at /root/.cargo/registry/…/linux/mod.rs:765: neither WAYLAND_DISPLAY nor …").
+fn window_error(raw: &str) -> String {
+    if raw.contains("WAYLAND_DISPLAY") && raw.contains("DISPLAY is set") {
+        return "no display (neither DISPLAY nor WAYLAND_DISPLAY is set): run it in a desktop \
+                session, or use the command-line commands (endofuse --help)"
+            .into();
+    }
+    // Keep the message, drop the source location before it.
+    match raw.find(".rs:") {
+        Some(at) => {
+            let after = &raw[at..];
+            let tail = after.find(": ").map_or(after, |k| &after[k + 2..]);
+            let head = raw[..at].rsplit_once(" at ").map_or("", |(h, _)| h);
+            format!("{head}: {tail}")
+        }
+        None => raw.to_string(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::window_error;
+
+    /// winit's errors lose the location in its own source; no display is said plainly.
+    #[test]
+    fn window_errors_are_said_without_winits_source_paths() {
+        let raw = "winit EventLoopError: os error at /root/.cargo/registry/src/index.crates.io-1949cf8c6b5b557f/winit-0.30.13/src/platform_impl/linux/mod.rs:765: neither WAYLAND_DISPLAY nor WAYLAND_SOCKET nor DISPLAY is set.";
+        let said = window_error(raw);
+        assert!(
+            said.starts_with("no display") && !said.contains(".cargo"),
+            "{said}"
+        );
+        let other =
+            window_error("winit EventLoopError: os error at /x/y/mod.rs:12: the X server refused");
+        assert_eq!(
+            other,
+            "winit EventLoopError: os error: the X server refused"
+        );
+        assert_eq!(window_error("plain"), "plain");
+    }
 }

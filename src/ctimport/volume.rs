@@ -63,6 +63,8 @@ pub enum VolumeError {
     NoSpacing { index: usize, value: f32 },
     #[error("the volume is empty (a dimension of size 0)")]
     Empty,
+    #[error("dim[{index}] is {size}: a size cannot be negative (a broken header)")]
+    NegativeSize { index: usize, size: i16 },
     #[error(
         "a header without voxels (the .hdr of a .hdr/.img pair): give a single-file .nii or .nii.gz"
     )]
@@ -210,8 +212,21 @@ const RESERVE_AT_MOST: usize = 16 << 20;
 
 /// The grid's size and the datatype, refused when they cannot be a label map.
 fn grid(header: &nifti::NiftiHeader) -> Result<([usize; 3], NiftiType), VolumeError> {
-    let ndim = header.dim[0] as usize;
-    let dims_all: Vec<usize> = header.dim[1..=ndim.clamp(1, 7)]
+    // NIfTI-1 stores dim[] as signed 16-bit; the reader hands them over unsigned, so a
+    // negative size read as 65,000-odd voxels (and a request for 17 GB of data).
+    let signed = header.dim.map(|d| d as i16);
+    let ndim = signed[0].max(0) as usize;
+    if let Some((axis, &d)) = signed[1..=ndim.clamp(1, 7)]
+        .iter()
+        .enumerate()
+        .find(|(_, d)| **d < 0)
+    {
+        return Err(VolumeError::NegativeSize {
+            index: axis + 1,
+            size: d,
+        });
+    }
+    let dims_all: Vec<usize> = signed[1..=ndim.clamp(1, 7)]
         .iter()
         .map(|&d| d as usize)
         .collect();
@@ -789,6 +804,11 @@ mod tests {
             e.contains("12 bytes of voxel data, the header says 1000000000"),
             "{e}"
         );
+        // A negative size (dim[] is signed) is said as such, not as 65,531 voxels.
+        let mut negative = kits.clone();
+        negative[44..46].copy_from_slice(&(-5i16).to_le_bytes());
+        let e = read_bytes(&p, &negative).unwrap_err().to_string();
+        assert!(e.contains("dim[2] is -5"), "{e}");
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

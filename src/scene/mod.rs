@@ -138,8 +138,19 @@ impl Scene {
             };
             InputError::new(json_path, what)
         })?;
-        let file: SceneFile = serde_json::from_str(&text)
-            .map_err(|e| InputError::new(json_path, format!("malformed scene: {e}")))?;
+        let file: SceneFile = serde_json::from_str(&text).map_err(|e| {
+            // serde's words for a document of the wrong shape name our struct ("expected
+            // struct SceneFile with 10 elements" for an array): say what the file must be.
+            let top = serde_json::from_str::<serde_json::Value>(&text).ok();
+            let problem = match top {
+                Some(v) if !v.is_object() => format!(
+                    "malformed scene: the document is {}, not an object {{\"format\": …, \"cameras\": […], …}}",
+                    json_kind(&v)
+                ),
+                _ => format!("malformed scene: {e}"),
+            };
+            InputError::new(json_path, problem)
+        })?;
         let root = json_path
             .parent()
             .map(Path::to_path_buf)
@@ -719,4 +730,16 @@ pub fn read_hidden_mask(path: &Path, size: (u32, u32)) -> Result<LabelImage, Inp
         ));
     }
     Ok(img)
+}
+
+/// "an array", "a number", … for a JSON value, in messages.
+fn json_kind(v: &serde_json::Value) -> &'static str {
+    match v {
+        serde_json::Value::Null => "null",
+        serde_json::Value::Bool(_) => "a boolean",
+        serde_json::Value::Number(_) => "a number",
+        serde_json::Value::String(_) => "a string",
+        serde_json::Value::Array(_) => "an array",
+        serde_json::Value::Object(_) => "an object",
+    }
 }

@@ -607,5 +607,10 @@ mod tests {
             RecordedRun::from_json(&old.to_string()),
             Err(ConfigFileError::NoConfig)
         ));
+        // A classify run's metrics are not a fit's ("unknown field `forest`" before).
+        let classify = serde_json::json!({ "forest": { "trees": 20 }, "dice": {} });
+        let err = RecordedRun::from_json(&classify.to_string()).unwrap_err();
+        assert!(matches!(err, ConfigFileError::ClassifyMetrics));
+        assert!(err.to_string().contains("`classify` metrics.json"));
     }
 }

@@ -177,6 +177,10 @@ pub enum ConfigFileError {
         "this metrics.json records no fit configuration (it was written before runs recorded one)"
     )]
     NoConfig,
+    #[error(
+        "this is a `classify` metrics.json (it holds a forest, no fit): --config takes a fit configuration or a `track` run's metrics.json"
+    )]
+    ClassifyMetrics,
 }
 
 /// Knobs added since 2026-12-06 with a default that changes the fit, and the value that does
@@ -213,6 +217,9 @@ impl RecordedRun {
         let Some(recorded) = value.get("config") else {
             if value.get("timing").is_some() {
                 return Err(ConfigFileError::NoConfig);
+            }
+            if value.get("forest").is_some() && value.get("fit").is_none() {
+                return Err(ConfigFileError::ClassifyMetrics);
             }
             return Ok(RecordedRun {
                 config: serde_json::from_value(value)?,
