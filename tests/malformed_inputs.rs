@@ -428,6 +428,16 @@ const NOT_A_VIDEO: &[&str] = &[
 fn malformed_scene_json() {
     check_all(vec![
         case(
+            "top-level-array",
+            "scene/scene.json",
+            &["malformed scene", "is an array, not an object"],
+            |r| {
+                info(&scene(r, |s| {
+                    edit_json(s, |v| *v = serde_json::json!([1, 2, 3]))
+                }))
+            },
+        ),
+        case(
             "fx-nan-string",
             "scene/scene.json",
             &["malformed scene"],
