@@ -298,7 +298,12 @@ pub fn new_scene(
     });
     let view_files = view_paths(&options.views);
     inputs.extend(view_files.iter().map(PathBuf::as_path));
-    output::check_target(&options.out, options.force, &inputs)?;
+    output::check_target(
+        &options.out,
+        options.force,
+        &inputs,
+        output::Replaces::Scenes,
+    )?;
     let calibration = calib::read(&options.calib)?;
     progress("reading the views");
     let names: Vec<String> = calibration.cameras.iter().map(|c| c.name.clone()).collect();

@@ -587,6 +587,30 @@ fn braces_in_a_frames_folder_are_part_of_its_path() {
     assert!(frames.contains("b{{r}}x {{frame}}"), "{frames}");
     let (code, stderr) = info(&out);
     assert_eq!(code, 0, "{stderr}");
+
+    // The scene now holds painted seeds: --force no longer replaces it.
+    let seed = out.join("seeds/left/000000.png");
+    std::fs::create_dir_all(seed.parent().unwrap()).unwrap();
+    std::fs::copy(fixture.join("seeds/left/000000.png"), &seed).unwrap();
+    let again = Command::new(env!("CARGO_BIN_EXE_endofuse"))
+        .arg("new-scene")
+        .arg("--out")
+        .arg(&out)
+        .arg("--calib")
+        .arg(root.join("scene.json"))
+        .arg("--meshes")
+        .arg(root.join("meshes"))
+        .arg("--view")
+        .arg(format!("left={}", root.join("left").display()))
+        .arg("--view")
+        .arg(format!("right={}", root.join("right").display()))
+        .arg("--force")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&again.stderr);
+    assert_eq!(again.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("holds painted seeds"), "{stderr}");
+    assert!(seed.exists());
     let _ = std::fs::remove_dir_all(&fixture);
     let _ = std::fs::remove_dir_all(root.parent().unwrap());
 }

@@ -475,6 +475,20 @@ fn bad_label_volumes_are_refused_with_one_line() {
         "holds an input",
     );
     assert!(inside.exists() && earlier.join("ct.json").exists());
+    // A scene folder is never import-ct's to replace (its frames and seeds went with it).
+    let scene = dir.join("a-scene");
+    common::copy_dir(&common::fixture(), &scene);
+    expect_bad(
+        &[
+            f.as_os_str(),
+            "--out".as_ref(),
+            scene.as_os_str(),
+            "--force".as_ref(),
+        ],
+        "a-scene",
+        "holds a scene",
+    );
+    assert!(scene.join("seeds").is_dir() && scene.join("scene.json").is_file());
     // Nothing half-written is left beside it.
     let leftovers: Vec<_> = std::fs::read_dir(&dir)
         .unwrap()

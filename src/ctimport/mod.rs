@@ -196,7 +196,7 @@ pub fn import_ct(
     options: &ImportOptions,
     progress: &dyn Fn(&str),
 ) -> Result<ImportReport, Error> {
-    output::check_target(out, options.force, &[labels])?;
+    output::check_target(out, options.force, &[labels], output::Replaces::MeshesOnly)?;
     let report = read_and_build(labels, options, progress)?;
     progress("writing meshes and the deformation catalog");
     output::write(out, &report, options)?;

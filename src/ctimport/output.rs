@@ -17,9 +17,15 @@ pub fn canonical(p: &Path) -> PathBuf {
 
 /// Refuses an output folder that exists and is not empty, unless `force` — and even then
 /// refuses what replacing would destroy beyond an earlier output: the working folder or one
-/// above it, a folder holding one of the `inputs`, or a folder that is not an endofuse output
-/// (no ct.json, structures.json or scene.json in it).
-pub fn check_target(out: &Path, force: bool, inputs: &[&Path]) -> Result<(), Error> {
+/// above it, a folder holding one of the `inputs`, a folder that is not an endofuse output
+/// (no ct.json, structures.json or scene.json in it), a scene where `replaces` allows only
+/// meshes, and a scene holding what the user made in it (seeds, a session, run results).
+pub fn check_target(
+    out: &Path,
+    force: bool,
+    inputs: &[&Path],
+    replaces: Replaces,
+) -> Result<(), Error> {
     if out.is_file() {
         return Err(InputError::new(out, "is a file; --out needs a folder").into());
     }
@@ -46,7 +52,58 @@ pub fn check_target(out: &Path, force: bool, inputs: &[&Path]) -> Result<(), Err
         )
         .into());
     }
+    if replaces == Replaces::MeshesOnly && target.join("scene.json").is_file() {
+        return Err(InputError::new(
+            out,
+            "holds a scene (scene.json): --force replaces only an earlier import-ct output (ct.json, structures.json, meshes/)",
+        )
+        .into());
+    }
+    // A scene made earlier may since hold what the user made there: painted seeds, a saved
+    // session, track results (an import-ct --force over a scene folder wiped its frames and
+    // seeds).
+    if let Some(work) = user_work_in(&target) {
+        return Err(InputError::new(
+            out,
+            format!(
+                "holds {work}: --force will not replace it (move them, or choose another folder)"
+            ),
+        )
+        .into());
+    }
     Ok(())
+}
+
+/// What in a scene folder the user made after it was written, if anything: seeds painted or
+/// saved there, a session, a track or classify result inside it.
+fn user_work_in(dir: &Path) -> Option<String> {
+    let non_empty = |p: &Path| std::fs::read_dir(p).is_ok_and(|mut d| d.next().is_some());
+    if non_empty(&dir.join("seeds")) {
+        return Some("painted seeds (seeds/)".into());
+    }
+    let entries: Vec<PathBuf> = std::fs::read_dir(dir)
+        .map(|d| d.filter_map(|e| e.ok().map(|e| e.path())).collect())
+        .unwrap_or_default();
+    if let Some(session) = entries.iter().find(|p| {
+        p.file_name()
+            .and_then(|n| n.to_str())
+            .is_some_and(|n| n.ends_with(".endofuse.json"))
+    }) {
+        return Some(format!("a saved session ({})", session.display()));
+    }
+    entries
+        .iter()
+        .find(|p| p.is_dir() && p.join("metrics.json").is_file())
+        .map(|p| format!("results of a run ({})", p.display()))
+}
+
+/// What `--force` may replace besides an earlier import-ct output.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Replaces {
+    /// `import-ct`: its own outputs only, never a scene folder.
+    MeshesOnly,
+    /// `new-scene`: also a scene it made earlier, while nothing the user made is in it.
+    Scenes,
 }
 
 /// Refuses replacing `out` when that would destroy more than an output: when it is the

@@ -315,12 +315,17 @@ fn check(field: Field, path: &Path, replace: bool) -> Check {
                 Err("exists and is not empty: choose another folder or tick Replace".into())
             } else if non_empty {
                 // What the worker will refuse even with Replace, said here already.
-                crate::ctimport::output::check_target(path, true, &[])
-                    .map(|()| "will be replaced".to_string())
-                    .map_err(|e| match e {
-                        crate::error::Error::Input(i) => i.problem,
-                        other => other.to_string(),
-                    })
+                crate::ctimport::output::check_target(
+                    path,
+                    true,
+                    &[],
+                    crate::ctimport::output::Replaces::Scenes,
+                )
+                .map(|()| "will be replaced".to_string())
+                .map_err(|e| match e {
+                    crate::error::Error::Input(i) => i.problem,
+                    other => other.to_string(),
+                })
             } else if path.is_file() {
                 Err("is a file".into())
             } else {
