@@ -24,6 +24,9 @@ pub fn summary(scene: &Scene, shape: &JointShapeModel) -> String {
             "  {:<8} {}×{}  fx {:.1}  fy {:.1}  cx {:.1}  cy {:.1}  k1 {:.4}  k2 {:.4}  p1 {:.4}  p2 {:.4}",
             c.name, c.width, c.height, k.fx, k.fy, k.cx, k.cy, k.k1, k.k2, k.p1, k.p2
         );
+        if k.k3 != 0.0 {
+            let _ = write!(s, "  k3 {:.4}", k.k3);
+        }
         if i > 0 {
             let _ = write!(s, "  baseline {:.2} mm", c.baseline_mm());
         }
@@ -112,6 +115,25 @@ pub fn summary(scene: &Scene, shape: &JointShapeModel) -> String {
             })
             .collect();
         let _ = writeln!(s, "seeds: frames {}: {}", list(&frames), classes.join(", "));
+        // What `track` and `classify` would refuse, said here rather than after loading.
+        let mut missing: Vec<String> = Vec::new();
+        if !counts.contains_key(&SEED_BACKGROUND) {
+            missing.push("background/tools (seed value 255)".into());
+        }
+        missing.extend(
+            scene
+                .structures
+                .iter()
+                .filter(|st| st.visible && !counts.contains_key(&st.label))
+                .map(|st| format!("'{}' (label {})", st.name, st.label)),
+        );
+        if !missing.is_empty() {
+            let _ = writeln!(
+                s,
+                "  not painted yet: {} — track and classify need a stroke of every class",
+                missing.join(", ")
+            );
+        }
     }
     let gt = &scene.ground_truth;
     let gt_frames = scene.ground_truth_frames();

@@ -71,6 +71,35 @@ fn the_fixture_itself_is_accepted() {
     assert!(text.contains("baseline 5.00 mm"), "{text}");
     assert!(text.contains("hidden"), "{text}");
     assert!(text.contains("seeds: frames 0: kidney"), "{text}");
+    assert!(!text.contains("not painted yet"), "{text}");
+
+    // A class without a stroke is said by info (track and classify refuse it).
+    let d = scratch("one-class-unpainted");
+    let seed = d.join("seeds/left/000000.png");
+    let img = image::open(&seed).unwrap().to_luma8();
+    let kidney_only = image::GrayImage::from_fn(img.width(), img.height(), |x, y| {
+        let v = img.get_pixel(x, y).0[0];
+        image::Luma([if v == 255 { 0 } else { v }])
+    });
+    kidney_only.save(&seed).unwrap();
+    for other in std::fs::read_dir(d.join("seeds")).unwrap().flatten() {
+        for f in std::fs::read_dir(other.path()).unwrap().flatten() {
+            if f.path() != seed {
+                std::fs::remove_file(f.path()).unwrap();
+            }
+        }
+    }
+    let out = Command::new(env!("CARGO_BIN_EXE_endofuse"))
+        .arg("info")
+        .arg(&d)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains("not painted yet: background/tools (seed value 255)"),
+        "{text}"
+    );
+    let _ = std::fs::remove_dir_all(&d);
 }
 
 #[test]
