@@ -407,8 +407,17 @@ fn run(cli: Cli) -> Result<()> {
                 eprintln!("track: Dice {:.3} ({})", d.mean, by.join(", "));
             }
             for (name, h) in &m.hidden {
+                // A ground-truth trajectory that covers part of the run scores that part.
+                let over = if h.centroid_frames < m.frames {
+                    format!(
+                        " over {} of {} frames (the ground-truth trajectory gives no centroid for the others)",
+                        h.centroid_frames, m.frames
+                    )
+                } else {
+                    String::new()
+                };
                 eprintln!(
-                    "track: hidden {name}: centroid error {:.2} mm (max {:.2}){}",
+                    "track: hidden {name}: centroid error {:.2} mm (max {:.2}){over}{}",
                     h.centroid_error_mm_mean,
                     h.centroid_error_mm_max,
                     h.dice_mean

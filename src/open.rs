@@ -12,6 +12,12 @@ pub const DEMO: &str = "demo";
 /// Opens `spec`: the built-in demo, or a scene folder or scene.json (frame headers checked).
 pub fn scene(spec: &str) -> Result<Scene, InputError> {
     if spec == DEMO {
+        // The word wins (CONTRACT §1); a folder of that name here is said, not opened silently.
+        if Path::new(DEMO).exists() {
+            log::warn!(
+                "'demo' names the built-in demo scene; the folder 'demo' here is opened as ./demo"
+            );
+        }
         crate::synth::demo_scene()
     } else {
         Scene::open(Path::new(spec))

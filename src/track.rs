@@ -30,6 +30,8 @@ pub struct HiddenMetrics {
     pub dice_mean: Option<f64>,
     pub centroid_error_mm_mean: f64,
     pub centroid_error_mm_max: f64,
+    /// Frames the centroid error is over: those the ground-truth trajectory gives a centroid.
+    pub centroid_frames: usize,
     /// Share of frames whose true centroid lies inside the 95 % region (`hidden_region`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub coverage95: Option<f64>,
@@ -439,6 +441,7 @@ impl<'a> Recorder<'a> {
                         dice_mean: self.hidden_dice.get(name).map(|v| mean(v)),
                         centroid_error_mm_mean: mean(errs),
                         centroid_error_mm_max: errs.iter().cloned().fold(0.0, f64::max),
+                        centroid_frames: errs.len(),
                         coverage95: self.region.get(name).filter(|r| !r.is_empty()).map(|r| {
                             r.iter().filter(|(_, inside)| *inside).count() as f64 / r.len() as f64
                         }),
