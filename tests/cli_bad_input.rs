@@ -594,21 +594,25 @@ fn braces_in_a_frames_folder_are_part_of_its_path() {
     let root = common::scratch_dir("bad-braces").join("b{r}x {frame}");
     common::copy_dir(&fixture, &root);
     let out = root.parent().unwrap().join("scene");
-    let run = Command::new(env!("CARGO_BIN_EXE_endofuse"))
-        .arg("new-scene")
-        .arg("--out")
-        .arg(&out)
-        .arg("--calib")
-        .arg(root.join("scene.json"))
-        .arg("--meshes")
-        .arg(root.join("meshes"))
-        .arg("--view")
-        .arg(format!("left={}", root.join("left").display()))
-        .arg("--view")
-        .arg(format!("right={}", root.join("right").display()))
-        .env_remove("RUST_LOG")
-        .output()
-        .unwrap();
+    let new_scene = |extra: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_endofuse"))
+            .arg("new-scene")
+            .arg("--out")
+            .arg(&out)
+            .arg("--calib")
+            .arg(root.join("scene.json"))
+            .arg("--meshes")
+            .arg(root.join("meshes"))
+            .arg("--view")
+            .arg(format!("left={}", root.join("left").display()))
+            .arg("--view")
+            .arg(format!("right={}", root.join("right").display()))
+            .args(extra)
+            .env_remove("RUST_LOG")
+            .output()
+            .unwrap()
+    };
+    let run = new_scene(&[]);
     let stderr = String::from_utf8_lossy(&run.stderr);
     assert_eq!(run.status.code(), Some(0), "{stderr}");
     let scene = common::read_json(&out.join("scene.json"));
@@ -621,21 +625,7 @@ fn braces_in_a_frames_folder_are_part_of_its_path() {
     let seed = out.join("seeds/left/000000.png");
     std::fs::create_dir_all(seed.parent().unwrap()).unwrap();
     std::fs::copy(fixture.join("seeds/left/000000.png"), &seed).unwrap();
-    let again = Command::new(env!("CARGO_BIN_EXE_endofuse"))
-        .arg("new-scene")
-        .arg("--out")
-        .arg(&out)
-        .arg("--calib")
-        .arg(root.join("scene.json"))
-        .arg("--meshes")
-        .arg(root.join("meshes"))
-        .arg("--view")
-        .arg(format!("left={}", root.join("left").display()))
-        .arg("--view")
-        .arg(format!("right={}", root.join("right").display()))
-        .arg("--force")
-        .output()
-        .unwrap();
+    let again = new_scene(&["--force"]);
     let stderr = String::from_utf8_lossy(&again.stderr);
     assert_eq!(again.status.code(), Some(2), "{stderr}");
     assert!(stderr.contains("holds painted seeds"), "{stderr}");

@@ -118,7 +118,7 @@ impl FrameContext<'_> {
     }
 
     /// [`FrameContext::surface_jacobian`] written into `out` (cleared first): the steps take
-    /// it for every line and match, and a fresh vector each time was a quarter of their cost.
+    /// it for every line, and a fresh vector each time was a quarter of their cost.
     #[allow(clippy::too_many_arguments)]
     pub fn surface_jacobian_into(
         &self,
