@@ -78,10 +78,9 @@ enum Command {
         /// Label numbers, e.g. kidney=1,tumour=2,cyst=3 (KiTS by default).
         #[arg(long = "labels", value_name = "MAP")]
         labels_map: Option<String>,
-        /// Target vertex count of the kidney mesh, 500 to 100000 (tumours get about a
-        /// quarter, at least 100).
-        #[arg(long, default_value_t = 5000,
-              value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(500..=100_000))]
+        /// Target vertex count of the kidney mesh, at least 100 (tumours get about a quarter,
+        /// at least 100).
+        #[arg(long, default_value_t = 5000)]
         vertices: usize,
         /// Replace a non-empty output folder.
         #[arg(long)]
@@ -445,6 +444,11 @@ fn run(cli: Cli) -> Result<()> {
             vertices,
             force,
         }) => {
+            if vertices < 100 {
+                log::warn!(
+                    "--vertices {vertices}: a kidney mesh needs at least 100; meshing to 100"
+                );
+            }
             let mut options = endofuse::ctimport::ImportOptions {
                 side: endofuse::ctimport::Side::parse(&side).ok_or_else(|| {
                     endofuse::InputError::new(
@@ -452,7 +456,7 @@ fn run(cli: Cli) -> Result<()> {
                         format!("'{side}' is not left, right or auto"),
                     )
                 })?,
-                kidney_vertices: vertices,
+                kidney_vertices: vertices.max(100),
                 tumour_vertices: endofuse::ctimport::ImportOptions::tumour_vertices_for(vertices),
                 force,
                 ..Default::default()
@@ -577,11 +581,26 @@ fn run(cli: Cli) -> Result<()> {
                             .into());
                         }
                         (None, _, _) => {
-                            return Err(endofuse::InputError::new(
-                                file,
-                                "gives no image size: give the frames' size the cameras were calibrated at with --width and --height",
-                            )
-                            .into());
+                            // The default size, where the principal point says the cameras
+                            // could have been calibrated at it (within 15 % of its centre).
+                            let (w, h) = (960u32, 540u32);
+                            let near_centre = cal.cameras.iter().all(|c| {
+                                let k = &c.intrinsics;
+                                (k.cx - w as f64 / 2.0).abs() <= 0.15 * w as f64
+                                    && (k.cy - h as f64 / 2.0).abs() <= 0.15 * h as f64
+                            });
+                            if !near_centre {
+                                return Err(endofuse::InputError::new(
+                                    file,
+                                    format!("gives no image size, and its principal point (cx {:.1}, cy {:.1}) is far from the centre of the default {w}×{h}: give the frames' size the cameras were calibrated at with --width and --height", cal.cameras[0].intrinsics.cx, cal.cameras[0].intrinsics.cy),
+                                )
+                                .into());
+                            }
+                            log::warn!(
+                                "{}: gives no image size: rendering at {w}×{h} (--width and --height choose another)",
+                                file.display()
+                            );
+                            (w, h)
                         }
                     };
                     let cams = cal

@@ -321,6 +321,16 @@ pub fn new_scene(
                 .into());
             }
             let v = video_view(path, "stereo", options.copy_frames)?;
+            if v.size.0 < 2 {
+                return Err(InputError::new(
+                    path,
+                    format!(
+                        "is {} px wide: a side-by-side video holds two views",
+                        v.size.0
+                    ),
+                )
+                .into());
+            }
             let (l, r) = video::Crop::side_by_side(v.size.0, v.size.1);
             if v.size.0 % 2 == 1 {
                 notes.push(format!(

@@ -15,7 +15,7 @@ pub fn scene(spec: &str) -> Result<Scene, InputError> {
         // The word wins (CONTRACT §1); a folder of that name here is said, not opened silently.
         if Path::new(DEMO).exists() {
             log::warn!(
-                "'demo' names the built-in demo scene; the folder 'demo' here is opened as ./demo"
+                "'demo' opens the built-in demo scene; to open the folder named demo here, give ./demo"
             );
         }
         crate::synth::demo_scene()

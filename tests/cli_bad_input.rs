@@ -475,17 +475,9 @@ fn bad_synth_options_are_refused() {
         .unwrap();
     assert_eq!(run.status.code(), Some(2), "a forest too large to allocate");
     assert!(String::from_utf8_lossy(&run.stderr).contains("--trees"));
-    // Ten vertices cannot describe a kidney (they gave 8,614 with no word).
-    let run = Command::new(env!("CARGO_BIN_EXE_endofuse"))
-        .args(["import-ct", "ct.nii.gz", "--vertices", "10", "--out"])
-        .arg(&out)
-        .output()
-        .unwrap();
-    assert_eq!(run.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&run.stderr).contains("500..=100000"));
-
-    // A calibration without an image size rendered at the default 960×540, its principal point
-    // where the real image's was: the size must be given, and then it is used.
+    // A calibration without an image size rendered at the default 960×540 even where its
+    // principal point says the cameras were calibrated at another size: then the size must be
+    // given, and it is used.
     let sizeless = out.with_extension("sizeless.yml");
     let yaml = std::fs::read_to_string(common::fixture().join("../calib/opencv4_stereo.yml"))
         .unwrap()
@@ -518,6 +510,26 @@ fn bad_synth_options_are_refused() {
     );
     let scene = common::read_json(&out.join("scene.json"));
     assert_eq!(scene["cameras"][0]["width"], 1280);
+    let _ = std::fs::remove_dir_all(&out);
+    // One whose principal point fits the default size renders at it, and says so.
+    let matrix = |data: &str| {
+        format!("!!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n   data: [ {data} ]\n")
+    };
+    let zeros =
+        "!!opencv-matrix\n   rows: 1\n   cols: 5\n   dt: d\n   data: [ 0., 0., 0., 0., 0. ]\n";
+    let centred = format!(
+        "%YAML:1.0\n---\nK1: {}D1: {zeros}K2: {}D2: {zeros}R: {}T: !!opencv-matrix\n   rows: 3\n   cols: 1\n   dt: d\n   data: [ -4.4, 0., 0. ]\n",
+        matrix("1000., 0., 478., 0., 1000., 271., 0., 0., 1."),
+        matrix("1000., 0., 482., 0., 1000., 269., 0., 0., 1."),
+        matrix("1., 0., 0., 0., 1., 0., 0., 0., 1."),
+    );
+    std::fs::write(&sizeless, centred).unwrap();
+    let run = synth_with(&[]);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(0), "{stderr}");
+    assert!(stderr.contains("rendering at 960×540"), "{stderr}");
+    let scene = common::read_json(&out.join("scene.json"));
+    assert_eq!(scene["cameras"][0]["width"], 960);
     let _ = std::fs::remove_dir_all(&out);
     let _ = std::fs::remove_file(&sizeless);
 }
@@ -621,7 +633,24 @@ fn braces_in_a_frames_folder_are_part_of_its_path() {
     let (code, stderr) = info(&out);
     assert_eq!(code, 0, "{stderr}");
 
-    // The scene now holds painted seeds: --force no longer replaces it.
+    // new-scene --force replaces the scene it made …
+    let again = new_scene(&["--force"]);
+    assert_eq!(
+        again.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&again.stderr)
+    );
+    // … but not once it holds painted seeds, or anything else it did not write.
+    std::fs::write(out.join("notes.txt"), "mine").unwrap();
+    let refused = new_scene(&["--force"]);
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert_eq!(refused.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("'notes.txt', which new-scene did not write"),
+        "{stderr}"
+    );
+    std::fs::remove_file(out.join("notes.txt")).unwrap();
     let seed = out.join("seeds/left/000000.png");
     std::fs::create_dir_all(seed.parent().unwrap()).unwrap();
     std::fs::copy(fixture.join("seeds/left/000000.png"), &seed).unwrap();

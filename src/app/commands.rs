@@ -281,8 +281,8 @@ impl EndofuseApp {
         self.doc.place(frame, guess, true);
         self.screen.textures.forget_overlays();
         self.status.notify(
-            "The model starts in front of the camera: drag it onto the organ (right- or \
-             Ctrl-drag turns it, the wheel sets its depth), or Place automatically.",
+            "Model in front of the camera: drag it onto the organ (right-drag turns, \
+             Shift+right-drag rolls, wheel: depth).",
         );
     }
 

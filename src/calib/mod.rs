@@ -5,8 +5,9 @@
 //! format detection (from the content; the extension only breaks ties) and the checks every format
 //! shares: a distortion vector the model can represent (k1, k2, p1, p2, k3), a pinhole camera
 //! matrix without skew, a proper rotation, finite numbers, and a baseline that looks like
-//! millimetres. The baseline is only a warning (`log::warn!` when |T| < 0.5 or > 200): a file in
-//! metres or centimetres still loads, and the log says why the overlay then looks wrong.
+//! millimetres. The baseline is only a warning (|T| < 0.5 or > 200, in `Calibration::warnings`,
+//! which [`read`] says as `log::warn!` lines naming the file): a file in metres or centimetres
+//! still loads, and the log says why the overlay then looks wrong.
 //!
 //! Conventions: camera 0 is the left/reference camera, with identity extrinsics; camera m's
 //! extrinsics map camera-0 coordinates into camera m, X_m = R·X_0 + T (eq. 11), which is exactly

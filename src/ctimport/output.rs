@@ -59,14 +59,14 @@ pub fn check_target(
         )
         .into());
     }
-    // A scene made earlier may since hold what the user made there: painted seeds, a saved
-    // session, track results (an import-ct --force over a scene folder wiped its frames and
-    // seeds).
-    if let Some(work) = user_work_in(&target) {
+    // What the command wrote is all --force may take: anything else in the folder is the
+    // user's (painted seeds, a session under any name, run results, frames or ground truth of a
+    // scene written by hand). An import-ct --force over a scene folder wiped all of those.
+    if let Some(other) = not_written_by(&target, replaces) {
         return Err(InputError::new(
             out,
             format!(
-                "holds {work}: --force will not replace it (move them, or choose another folder)"
+                "holds {other}: --force will not replace it (move it, or choose another folder)"
             ),
         )
         .into());
@@ -74,27 +74,59 @@ pub fn check_target(
     Ok(())
 }
 
-/// What in a scene folder the user made after it was written, if anything: seeds painted or
-/// saved there, a session, a track or classify result inside it.
-fn user_work_in(dir: &Path) -> Option<String> {
-    let non_empty = |p: &Path| std::fs::read_dir(p).is_ok_and(|mut d| d.next().is_some());
-    if non_empty(&dir.join("seeds")) {
-        return Some("painted seeds (seeds/)".into());
+/// The first entry of `dir` that the command `replaces` names did not write, said for the
+/// user; None when the folder holds only what it writes: ct.json, structures.json and meshes/
+/// (import-ct), and for new-scene also scene.json and the frames it copied (the first part of
+/// each camera's relative frame path).
+fn not_written_by(dir: &Path, replaces: Replaces) -> Option<String> {
+    let mut ours: Vec<String> = ["ct.json", "structures.json", "meshes"]
+        .map(String::from)
+        .to_vec();
+    if replaces == Replaces::Scenes {
+        ours.push("scene.json".into());
+        let scene = std::fs::read_to_string(dir.join("scene.json"))
+            .ok()
+            .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok());
+        let cameras = scene
+            .as_ref()
+            .and_then(|v| v.get("cameras"))
+            .and_then(|c| c.as_array())
+            .cloned()
+            .unwrap_or_default();
+        for cam in cameras {
+            let frames = cam.get("frames");
+            let path = frames
+                .and_then(|f| f.as_str())
+                .or_else(|| frames.and_then(|f| f.get("video")).and_then(|v| v.as_str()));
+            if let Some(first) = path
+                .map(Path::new)
+                .filter(|p| p.is_relative())
+                .and_then(|p| p.components().next())
+            {
+                ours.push(first.as_os_str().to_string_lossy().into_owned());
+            }
+        }
     }
-    let entries: Vec<PathBuf> = std::fs::read_dir(dir)
-        .map(|d| d.filter_map(|e| e.ok().map(|e| e.path())).collect())
-        .unwrap_or_default();
-    if let Some(session) = entries.iter().find(|p| {
-        p.file_name()
-            .and_then(|n| n.to_str())
-            .is_some_and(|n| n.ends_with(".endofuse.json"))
-    }) {
-        return Some(format!("a saved session ({})", session.display()));
-    }
-    entries
-        .iter()
-        .find(|p| p.is_dir() && p.join("metrics.json").is_file())
-        .map(|p| format!("results of a run ({})", p.display()))
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .ok()?
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| !ours.contains(n))
+        .collect();
+    names.sort();
+    let first = names.first()?;
+    Some(match first.as_str() {
+        "seeds" => "painted seeds (seeds/)".to_string(),
+        "gt" => "ground truth (gt/)".to_string(),
+        n if n.ends_with(".endofuse.json") => format!("a saved session ({n})"),
+        n => format!(
+            "'{n}', which {} did not write",
+            match replaces {
+                Replaces::MeshesOnly => "import-ct",
+                Replaces::Scenes => "new-scene",
+            }
+        ),
+    })
 }
 
 /// What `--force` may replace besides an earlier import-ct output.

@@ -58,7 +58,7 @@ pub enum VolumeError {
     )]
     VoxelSize { axis: &'static str, mm: f64 },
     #[error(
-        "pixdim[{index}] is {value}, and the header gives no sform: the voxels' size is unknown (nifti1_io would take 1 mm and the meshes would come out the wrong size); write the CT with its spacing"
+        "pixdim[{index}] is {value}, and the header gives no usable sform: the voxels' size is unknown (nifti1_io would take 1 mm and the meshes would come out the wrong size); write the CT with its spacing"
     )]
     NoSpacing { index: usize, value: f32 },
     #[error("the volume is empty (a dimension of size 0)")]

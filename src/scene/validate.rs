@@ -161,11 +161,10 @@ pub(super) fn validate_camera(
             let template = PathTemplate::parse(p).map_err(|e| bad(CameraProblem::Frames(e)))?;
             if template.uses_frame() {
                 FramesSpec::Sequence(template)
-            } else if let Some(path) = template
-                .literal()
-                .filter(|path| crate::video::is_video_path(Path::new(path)))
-            {
-                // Its braces undoubled (a video under a folder named `br{x}`).
+            } else if crate::video::is_video_path(Path::new(p)) {
+                // Its braces undoubled (a video under a folder named `br{x}`); a path with
+                // another placeholder was always taken as written.
+                let path = template.literal().unwrap_or_else(|| p.clone());
                 FramesSpec::Video { path, crop: None }
             } else {
                 return Err(bad(CameraProblem::NoFramePlaceholder {

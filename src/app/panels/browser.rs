@@ -71,6 +71,12 @@ impl Browser {
 
     /// Shows `folder` and lists it.
     pub fn enter(&mut self, folder: PathBuf) {
+        // A folder request's field names a subfolder of the folder shown: the one picked by a
+        // click before a double-click entered it is not one of the new folder's (the export
+        // went into seeds/seeds). A file name being saved stays.
+        if matches!(self.picker, Picker::Folder { .. }) {
+            self.name.clear();
+        }
         self.entries = list(&folder, &self.picker, self.show_hidden);
         self.path_text = folder.display().to_string();
         self.folder = folder;
@@ -454,6 +460,16 @@ mod tests {
         f.name = "export1".into();
         assert_eq!(f.confirm(), Some(d.join("export1")));
         assert!(d.join("export1").is_dir());
+        // A subfolder picked by a click, then entered by a double-click: the field no longer
+        // names it (the export went into sub/sub); a file name being saved stays.
+        let mut f = Browser::new(FileRequest::Export, &d);
+        f.name = "sub".into();
+        f.enter(d.join("sub"));
+        assert_eq!(f.name, "");
+        assert_eq!(f.confirm(), Some(d.join("sub")));
+        let mut b = Browser::new(FileRequest::SaveSession { then: None }, &d);
+        b.enter(d.join("sub"));
+        assert_eq!(b.name, "session.endofuse.json");
         // A start folder that no longer exists: the nearest one above.
         let b = Browser::new(FileRequest::LoadSession, &d.join("gone/deeper"));
         assert_eq!(b.folder, d);

@@ -13,7 +13,7 @@ pub const FIRST_STEPS: [&str; 6] = [
     "Paint seeds on the first frames: 1 background and tools, 2, 3, … the structures; B brush, E eraser.",
     "Train the forest (T) and check the probability view (P).",
     "Place the model (M, or Place automatically) and Fit this frame (F).",
-    "Track (Ctrl+T) in mode LSC; scrub the timeline; frames not yet fitted say so in the views.",
+    "Track (Ctrl+T) in mode LSC; scrub by clicking or dragging the timeline (bars: each frame's confidence, red lost; blue ticks: seeded frames); frames not yet fitted say so in the views.",
     "Review the plots, then File > Export, and save the session (Ctrl+S).",
 ];
 

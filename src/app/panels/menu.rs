@@ -152,7 +152,14 @@ pub fn next_step(doc: &crate::app::Document) -> &'static str {
         return "Next: train the forest (T), then check the probability view (P).";
     }
     if doc.results.is_empty() {
+        if doc.placement.is_some() {
+            return "Next: check the placed model, then fit this frame (F).";
+        }
         return "Next: place the model (M or Place automatically) and fit this frame (F).";
+    }
+    // Fits that found nothing: tracking on from them would hold a pose never found.
+    if doc.results.values().all(|r| r.lost) {
+        return "Next: the fit lost the organ: place the model again, closer (M, or Place automatically), and fit (F).";
     }
     if doc.results.len() < scene.frame_count {
         return "Next: track (Ctrl+T); frames not fitted yet say so in the views.";

@@ -182,7 +182,11 @@ fn side_contents(shown: &Shown, ui: &mut egui::Ui) {
                 });
         }
     } else {
+        // Two lines, as the trained forest's figures take: training must not push the buttons
+        // below down under the pointer (a click meant for Place automatically opened the mode
+        // list).
         ui.label(RichText::new("not trained yet").weak());
+        ui.label(RichText::new("train (T) once every class is painted").weak());
     }
     ui.horizontal(|ui| {
         for (a, on) in [
@@ -254,7 +258,8 @@ fn side_contents(shown: &Shown, ui: &mut egui::Ui) {
     if view.tool == Tool::Place {
         ui.label(
             RichText::new(
-                "Place model: drag to move, right- or Ctrl-drag to rotate, wheel for depth.",
+                "Place model: drag to move, right- or Ctrl-drag to turn, Shift+right-drag to \
+                 roll, wheel for depth.",
             )
             .weak()
             .small(),

@@ -122,13 +122,9 @@ pub fn timeline(shown: &Shown, layout: &mut Layout, ui: &mut egui::Ui) {
             let t = (((p.x - rect.left()) / w).floor().max(0.0) as usize).min(n - 1);
             send(AppCommand::SetFrame(t));
         }
-        // Not while scrubbing: the tooltip opens under the pointer, over the buttons below.
-        if !(response.dragged() || response.is_pointer_button_down_on()) {
-            response.on_hover_text(
-                "Per-frame confidence (red: lost), blue ticks: seeded frames. Click or drag to \
-                 scrub.",
-            );
-        }
+        // No tooltip: it opened under the pointer, over the buttons below the strip, whenever
+        // the pointer crossed it. What the strip shows is in the Help sheet's first steps.
+        let _ = response;
         ui.horizontal(|ui| {
             let ctx = ui.ctx().clone();
             for (a, icon) in [

@@ -197,7 +197,17 @@ pub fn views(shown: &Shown, screen: &mut Screen, ui: &mut egui::Ui) {
                 Color32::from_rgb(255, 190, 70),
             )),
             Some(r) if r.lost => Some((
-                "LOST: holding the last good pose",
+                // Before any good fit there is no good pose to hold.
+                if shown
+                    .doc
+                    .results
+                    .range(..view.frame)
+                    .any(|(_, earlier)| !earlier.lost)
+                {
+                    "LOST: holding the last good pose"
+                } else {
+                    "LOST: not found from this start: place the model again (M)"
+                },
                 Color32::from_rgb(255, 90, 90),
             )),
             _ => None,
@@ -319,9 +329,8 @@ fn interact(
         }
         return;
     }
-    let place = |pan: Vec2, rotate: Vec2, depth_mm: f64, new_step: bool| {
-        if let Some(moved) = place::moved_placement(shown.doc, view.frame, c, pan, rotate, depth_mm)
-        {
+    let place = |pan: Vec2, turn: glam::DVec3, depth_mm: f64, new_step: bool| {
+        if let Some(moved) = place::moved_placement(shown.doc, view.frame, c, pan, turn, depth_mm) {
             send(AppCommand::Place {
                 affine: moved,
                 new_step,
@@ -346,7 +355,12 @@ fn interact(
                 let stroke = &mut screen.stroke;
                 let new_step = wheel_starts_step(stroke.placing, stroke.wheel_placed_s, now_s);
                 stroke.wheel_placed_s = Some(now_s);
-                place(Vec2::ZERO, Vec2::ZERO, -(amount as f64) * 0.05, new_step);
+                place(
+                    Vec2::ZERO,
+                    glam::DVec3::ZERO,
+                    -(amount as f64) * 0.05,
+                    new_step,
+                );
             } else if let Some(p) = response.hover_pos() {
                 transform.zoom_about(rect, cam_size, p, (amount * 0.002).exp());
                 send(AppCommand::SetTransform(transform));
@@ -410,11 +424,18 @@ fn interact(
                 // A drag that starts is a step of its own even when no frame saw the buttons
                 // up between it and the last one (a release and a press in one slow frame).
                 let new_step = !stroke.placing || response.drag_started();
-                if secondary || modifiers.command {
-                    place(Vec2::ZERO, d * 0.01, 0.0, new_step);
+                // Radians per screen pixel of drag: x turns about the view's vertical axis, y
+                // about its horizontal one; with Shift, x rolls in the image plane (a kidney
+                // lying diagonally could not be matched before).
+                let (ax, ay) = (d.x as f64 * 0.01, d.y as f64 * 0.01);
+                if (secondary || modifiers.command) && modifiers.shift {
+                    place(Vec2::ZERO, glam::DVec3::new(0.0, 0.0, ax), 0.0, new_step);
+                    stroke.placing = true;
+                } else if secondary || modifiers.command {
+                    place(Vec2::ZERO, glam::DVec3::new(-ay, ax, 0.0), 0.0, new_step);
                     stroke.placing = true;
                 } else if primary {
-                    place(d, Vec2::ZERO, 0.0, new_step);
+                    place(d, glam::DVec3::ZERO, 0.0, new_step);
                     stroke.placing = true;
                 }
                 // A drag is a gesture of its own, apart from wheel turns before and after.

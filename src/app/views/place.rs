@@ -1,5 +1,6 @@
 //! Placing the model by hand in a view: a drag moves it in the view plane, a right- or
-//! Ctrl-drag turns it about its centre, the wheel moves it along the view ray.
+//! Ctrl-drag turns it about its centre, a Shift+right-drag rolls it in the image plane, the
+//! wheel moves it along the view ray.
 
 use crate::app::state::Document;
 use crate::geometry::Affine;
@@ -7,7 +8,7 @@ use egui::Vec2;
 use glam::{DMat3, DVec3};
 
 /// The model drawn at the current frame moved by hand: `pan_px` in the view plane of camera
-/// `c`, `rotate` (radians about the camera's y and x axes, around the model's centre),
+/// `c`, `turn_rad` (a rotation vector in camera `c`'s axes, radians, around the model's centre),
 /// `depth_mm` along the view ray. None without a model to move, or for a move that would not be
 /// finite.
 pub fn moved_placement(
@@ -15,7 +16,7 @@ pub fn moved_placement(
     frame: usize,
     c: usize,
     pan_px: Vec2,
-    rotate: Vec2,
+    turn_rad: DVec3,
     depth_mm: f64,
 ) -> Option<Affine> {
     let (scene, model) = (doc.scene.as_ref()?, doc.model.as_ref()?);
@@ -35,11 +36,7 @@ pub fn moved_placement(
         0.0,
     ) + centre_cam.normalize_or_zero() * depth_mm;
     let shift = to_ref * shift_cam;
-    let r_cam = crate::geometry::pose::rotation_from_vector(DVec3::new(
-        -(rotate.y as f64),
-        rotate.x as f64,
-        0.0,
-    ));
+    let r_cam = crate::geometry::pose::rotation_from_vector(turn_rad);
     let r: DMat3 = to_ref * r_cam * cam.extrinsics.rotation;
     let linear = r * state.affine.linear();
     let t = r * (state.affine.translation_mm() - centre) + centre + shift;

@@ -206,6 +206,129 @@ mod tests {
     use super::super::Sample;
     use super::*;
 
+    /// The target as it was computed before its buffers moved to the stack: vectors, and each
+    /// shift's energy summed over the samples in one pass.
+    fn target_with_vectors(line: &Line, c: DVec2, ep: &EnergyParams) -> (f64, f64) {
+        let r = (ep.half_length / 2) as i64;
+        let first = &line.samples[0];
+        let t0 = line.normal.dot(c - first.pos);
+        let offsets: Vec<i64> = line
+            .samples
+            .iter()
+            .map(|s| (line.normal.dot(c - s.pos) - t0).round() as i64)
+            .collect();
+        let lo = offsets.iter().copied().min().unwrap() - r;
+        let hi = offsets.iter().copied().max().unwrap() + r;
+        let first = (-(t0 + lo as f64) / ep.heaviside_px).exp();
+        let ratio = (-1.0 / ep.heaviside_px).exp();
+        let mut power = first;
+        let heaviside: Vec<f64> = (lo..=hi)
+            .map(|_| {
+                let h = 1.0 / (1.0 + power);
+                power *= ratio;
+                h
+            })
+            .collect();
+        let profile: Vec<f64> = (-r..=r)
+            .map(|delta| {
+                line.samples
+                    .iter()
+                    .zip(&offsets)
+                    .map(|(s, &m)| {
+                        let h = heaviside[(m + delta - lo) as usize];
+                        s.g_f as f64 * h + s.g_b as f64 * (1.0 - h)
+                    })
+                    .sum()
+            })
+            .collect();
+        let min = profile.iter().cloned().fold(f64::INFINITY, f64::min);
+        let weights: Vec<f64> = profile.iter().map(|e| (-(e - min)).exp()).collect();
+        let total: f64 = weights.iter().sum();
+        let mean = weights
+            .iter()
+            .enumerate()
+            .map(|(i, w)| w * (i as i64 - r) as f64)
+            .sum::<f64>()
+            / total;
+        let var = weights
+            .iter()
+            .enumerate()
+            .map(|(i, w)| w * ((i as i64 - r) as f64 - mean).powi(2))
+            .sum::<f64>()
+            / total;
+        let k = profile
+            .iter()
+            .enumerate()
+            .min_by(|a, b| a.1.total_cmp(b.1))
+            .map(|(i, _)| i)
+            .unwrap();
+        if k == 0 || k + 1 == profile.len() {
+            return (k as f64 - r as f64, ep.saturated_line_variance_px2);
+        }
+        if var < ep.parabola_below_variance_px2 {
+            let [lowest, highest] = ep.parabola_variance_px2;
+            let (em, e0, ep) = (profile[k - 1], profile[k], profile[k + 1]);
+            let curvature = em - 2.0 * e0 + ep;
+            if curvature > 1e-9 {
+                let offset = (0.5 * (em - ep) / curvature).clamp(-0.5, 0.5);
+                return (
+                    k as f64 - r as f64 + offset,
+                    (1.0 / curvature).clamp(lowest, highest),
+                );
+            }
+        }
+        (mean, var.max(ep.min_softmin_variance_px2))
+    }
+
+    /// The stack buffers give the very bits the vectors gave: random lines of every allowed
+    /// half-length, samples a pixel apart (as built), gaps of 2–3 px (a caller's line: the span
+    /// outgrows the stack's Heaviside buffer) and 200-sample lines (the heap path).
+    #[test]
+    fn stack_buffers_give_the_bits_the_vectors_gave() {
+        let mut rng = crate::rng::Rng::new(17);
+        let mut checked = 0;
+        for case in 0..600 {
+            let half_length = [2, 5, 10, 33, 64][case % 5];
+            let ep = EnergyParams {
+                half_length,
+                ..EnergyParams::default()
+            };
+            let (count, step) = match case % 3 {
+                0 => (2 * half_length + 1, 1.0),
+                1 => (2 * half_length + 1, 2.0 + (case % 2) as f64),
+                _ => (200, 1.0),
+            };
+            let angle = rng.uniform() * std::f64::consts::TAU;
+            let normal = DVec2::new(angle.cos(), angle.sin());
+            let centre = DVec2::new(100.0, 80.0);
+            let samples: Vec<Sample> = (0..count)
+                .map(|i| {
+                    let p_f = (rng.uniform() as f32).clamp(1e-3, 1.0 - 1e-3);
+                    Sample {
+                        pos: centre + normal * ((i as f64 - (count / 2) as f64) * step),
+                        pixel: 0,
+                        g_f: -p_f.ln(),
+                        g_b: -(1.0 - p_f).ln(),
+                        p_f,
+                    }
+                })
+                .collect();
+            let line = Line::for_tests(normal, samples);
+            let c = centre + normal * (rng.uniform() * 6.0 - 3.0);
+            let (a, b) = (
+                line_target(&line, c, &ep),
+                target_with_vectors(&line, c, &ep),
+            );
+            assert_eq!(
+                (a.0.to_bits(), a.1.to_bits()),
+                (b.0.to_bits(), b.1.to_bits()),
+                "case {case}: {a:?} against {b:?}"
+            );
+            checked += 1;
+        }
+        assert_eq!(checked, 600);
+    }
+
     /// A horizontal line through c = (20, 5) with outward normal +x, one sample per pixel from
     /// −10 to +10 px, and the forest's p_f at offset k given by `p`.
     fn line(p: impl Fn(i64) -> f32) -> (Line, DVec2) {
