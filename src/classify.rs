@@ -56,7 +56,7 @@ pub fn run(
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<ClassifyMetrics, Error> {
     // Ground truth checked whole before the run (it is read per frame as it is scored).
-    scene.decode_ground_truth(&|_, _| {})?;
+    scene.decode_ground_truth_of(frames.0..=frames.1, &|_, _| {})?;
     let model = Appearance::train(scene, params, cancel)?;
     let seeded = scene.seeds.seeded_frames();
     let names = &model.classes.names;

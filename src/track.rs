@@ -152,7 +152,7 @@ pub fn run_timed(
 ) -> Result<TrackMetrics, Error> {
     // Ground truth is read frame by frame as the run scores it: a bad value met at frame N
     // would throw N tracked frames away. Every image is checked before anything is done.
-    scene.decode_ground_truth(&|_, _| {})?;
+    scene.decode_ground_truth_of(frames.0..=frames.1, &|_, _| {})?;
     let forest = ForestParams::default();
     let appearance = Appearance::train(scene, &forest, cancel)?;
     log::info!(

@@ -412,7 +412,7 @@ fn run(
             }
             let model = need_model(state)?;
             // Ground truth checked whole first: a bad image met mid-run stopped the tracking.
-            scene.decode_ground_truth(&|_, _| {})?;
+            scene.decode_ground_truth_of(frames.0..=frames.1, &|_, _| {})?;
             // A fit or a placement the app passes is taken as it is; the scene's own pose
             // (the app starts from it until one replaces it) starts as `endofuse track` starts.
             let affine = match start.filter(|a| Some(*a) != scene.initial_pose) {

@@ -334,6 +334,22 @@ fn bad_ground_truth() {
     let mut img = image::GrayImage::new(64, 48);
     img.put_pixel(5, 5, image::Luma([9]));
     img.save(d.join("gt/left/000001.png")).unwrap();
+    // track checks every image of its range before it starts, not at the frame that has it.
+    let out = d.with_extension("track-out");
+    let run = Command::new(env!("CARGO_BIN_EXE_endofuse"))
+        .arg("track")
+        .arg(&d)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("gt/left/000001.png") && !stderr.contains("track: frame"),
+        "{stderr}"
+    );
+    assert!(!out.exists());
     expect_bad(
         &d,
         "gt/left/000001.png",

@@ -567,7 +567,17 @@ impl Scene {
     /// will read them: `info` then refuses what `track` would, not after a run. Without files
     /// (ground truth in memory, or none), nothing is read and no progress reported.
     pub fn decode_ground_truth(&self, progress: &dyn Fn(usize, usize)) -> Result<(), InputError> {
-        for t in 0..self.frame_count {
+        self.decode_ground_truth_of(0..=self.frame_count.saturating_sub(1), progress)
+    }
+
+    /// [`Scene::decode_ground_truth`] of the frames in `frames` (a run's range: what it will
+    /// score), `progress` counted over the scene's frames.
+    pub fn decode_ground_truth_of(
+        &self,
+        frames: std::ops::RangeInclusive<usize>,
+        progress: &dyn Fn(usize, usize),
+    ) -> Result<(), InputError> {
+        for t in frames.filter(|&t| t < self.frame_count) {
             let mut any = false;
             for c in 0..self.cameras.len() {
                 let (label_path, hidden_paths) = self.ground_truth_paths(t, c);
