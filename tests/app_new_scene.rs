@@ -210,4 +210,6 @@ fn the_new_scene_form_builds_a_scene_from_ct_calibration_and_videos_and_opens_it
         h.state().doc.placement.is_none(),
         "Ctrl+Z takes the start away"
     );
+    let notice = h.state().status.notice.clone().unwrap_or_default();
+    assert!(notice.contains("nothing placed"), "{notice}");
 }

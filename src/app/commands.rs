@@ -204,6 +204,13 @@ impl EndofuseApp {
                     self.screen.textures.forget_overlays();
                     self.status.notify(match restored {
                         Some(t) => format!("Model move undone: frame {t}'s fit is back."),
+                        // The start M put in front of the camera is a step too: said so, as
+                        // the model vanishing looked like an undo gone too far.
+                        None if self.doc.placement.is_none() => {
+                            "Model placement undone: nothing placed (M puts it back in front of \
+                             the camera)."
+                                .to_string()
+                        }
                         None => "Model move undone.".to_string(),
                     });
                 }
