@@ -568,22 +568,23 @@ fn run(cli: Cli) -> Result<()> {
                 Some(file) => {
                     let cal = endofuse::calib::read(file)?;
                     // A file without an image size (OpenCV's stereo calibration sample writes
-                    // none) rendered at the default 960×540 with its principal point where the
-                    // real image's was: the size must then be given.
+                    // none) rendered at the default size with its principal point where the
+                    // real image's was: the default now only where that point fits it.
                     let (w, h) = match (cal.image_size, width, height) {
                         (_, Some(w), Some(h)) => (w, h),
                         (Some(size), None, None) => size,
-                        (Some(_), _, _) => {
+                        // One of the two alone was ignored where the file gave no size.
+                        (_, Some(_), None) | (_, None, Some(_)) => {
                             return Err(endofuse::InputError::new(
                                 file,
-                                "give both --width and --height, or neither (the file's image size is used)",
+                                "give both --width and --height, or neither",
                             )
                             .into());
                         }
-                        (None, _, _) => {
+                        (None, None, None) => {
                             // The default size, where the principal point says the cameras
                             // could have been calibrated at it (within 15 % of its centre).
-                            let (w, h) = (960u32, 540u32);
+                            let (w, h) = SYNTH_DEFAULT_SIZE;
                             let near_centre = cal.cameras.iter().all(|c| {
                                 let k = &c.intrinsics;
                                 (k.cx - w as f64 / 2.0).abs() <= 0.15 * w as f64
@@ -609,7 +610,12 @@ fn run(cli: Cli) -> Result<()> {
                     let n = cams.len();
                     (Some(cams), w, h, n)
                 }
-                None => (None, width.unwrap_or(960), height.unwrap_or(540), views),
+                None => (
+                    None,
+                    width.unwrap_or(SYNTH_DEFAULT_SIZE.0),
+                    height.unwrap_or(SYNTH_DEFAULT_SIZE.1),
+                    views,
+                ),
             };
             let options = SynthOptions {
                 structures,
@@ -665,6 +671,9 @@ fn run(cli: Cli) -> Result<()> {
         }
     }
 }
+
+/// `synth`'s frame size without --width/--height (or a calibration's size).
+const SYNTH_DEFAULT_SIZE: (u32, u32) = (960, 540);
 
 /// Reads `track --config FILE`.
 fn read_fit_config(path: &std::path::Path) -> Result<RecordedRun> {
