@@ -374,7 +374,9 @@ impl StraightnessBound {
             .max(u[1].length_squared())
             .max(u[2].length_squared());
         // Inside Intrinsics::inside_fold's cheap bound (every point of the disk projects).
-        if !(s * (self.fold[0] + s * (self.fold[1] + s * self.fold[2])) < 0.5) {
+        // (Written so that NaN fails too.)
+        let fold = s * (self.fold[0] + s * (self.fold[1] + s * self.fold[2]));
+        if fold.is_nan() || fold >= 0.5 {
             return None;
         }
         let edge2 = (u[1] - u[0])
@@ -386,7 +388,7 @@ impl StraightnessBound {
             .length_squared()
             .min((c[2].px - c[1].px).length_squared())
             .min((c[0].px - c[2].px).length_squared());
-        if !(min_edge_px2 >= 1e-6) {
+        if min_edge_px2.is_nan() || min_edge_px2 < 1e-6 {
             return None;
         }
         let r = s.sqrt();
@@ -785,7 +787,7 @@ mod tests {
                 name: "t".into(),
                 width: 960,
                 height: 540,
-                intrinsics: intr.clone(),
+                intrinsics: intr,
                 extrinsics: Extrinsics::default(),
             };
             let bound = StraightnessBound::new(&intr, 0.2);
