@@ -280,10 +280,9 @@ TUNING = [
     (3310, 480, 270, 0.10, 2, "case_00170", True),
     (3311, 960, 540, 0.10, 2, None, True),
     (3312, 480, 270, 0.03, 4, None, False),
-    # The sixteenth: run once on 2026-12-07 (twenty-second session) with that session's final
-    # fit, unchanged in what it computes since the fifteenth (LSC Dice 0.955, hidden 1.71 / 6.13
-    # mm, fx 0.74 %, k1 0.021), so it joined the tuning set; 3701-3712 were fixed the same day
-    # before anything else was run.
+    # The sixteenth: run once on 2026-12-07 (twenty-second session) with that session's build
+    # (LSC Dice 0.955, hidden 1.71 / 6.13 mm, fx 0.74 %, k1 0.021), so it joined the tuning
+    # set; 3701-3712 were fixed the same day before anything else was run.
     (3501, 960, 540, 0.05, 2, None, True),
     (3502, 960, 540, 0.03, 2, "case_00010", True),
     (3503, 960, 540, 0.08, 2, None, False),
