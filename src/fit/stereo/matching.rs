@@ -191,8 +191,8 @@ fn bilinear(
 ) -> Option<f64> {
     // Negative and NaN coordinates first (NaN was sampled at 0 before): for the rest
     // truncation is the floor, and the matcher's ~130,000 samples a frame do not call libm's
-    // `floor` in a portable build (baseline x86-64 has no SSE4.1 rounding instruction; the
-    // default build targets the building CPU, .cargo/config.toml). Huge ones saturate, so the
+    // `floor` in a baseline x86-64 build (no SSE4.1 rounding instruction; the default build
+    // targets the building CPU, .cargo/config.toml). Huge ones saturate, so the
     // bound is checked without adding to them.
     if !(p.x >= 0.0 && p.y >= 0.0) {
         return None;
