@@ -7,6 +7,7 @@ pub mod app;
 pub mod appearance;
 pub mod calib;
 pub mod classify;
+pub mod cpu;
 pub mod ctimport;
 pub mod error;
 pub mod experiments;

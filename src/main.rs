@@ -184,6 +184,13 @@ enum Command {
 }
 
 fn main() -> ExitCode {
+    // Before anything else: a binary built for another CPU says so instead of dying on an
+    // illegal instruction somewhere later.
+    let missing = endofuse::cpu::missing_features();
+    if !missing.is_empty() {
+        eprintln!("endofuse: {}", endofuse::cpu::mismatch_message(&missing));
+        return ExitCode::from(1);
+    }
     // Our own warnings (a calibration's baseline not in millimetres, lines a calibration file
     // skipped, a truncated video) are shown, as `warning: …` lines: a user must not learn of
     // them only by asking. Dependencies stay quiet; diagnostics for whoever asks (RUST_LOG=info,
