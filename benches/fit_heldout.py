@@ -296,6 +296,22 @@ TUNING = [
     (3511, 960, 540, 0.10, 2, None, True),
     (3512, 480, 270, 0.03, 4, None, False),
 ]
+# The eighteenth, fixed on 2026-12-07 (twenty-second session) before 3701-3712 were run: the
+# next test set once 3701-3712 have been reported.
+NEXT_TEST = [
+    (3901, 960, 540, 0.05, 2, None, True),
+    (3902, 960, 540, 0.03, 2, "case_00023", True),
+    (3903, 960, 540, 0.08, 2, None, False),
+    (3904, 480, 270, 0.10, 2, None, True),
+    (3905, 480, 270, 0.03, 2, "case_00010", True),
+    (3906, 480, 270, 0.05, 2, None, True),
+    (3907, 480, 270, 0.08, 2, "case_00003", False),
+    (3908, 480, 270, 0.05, 4, None, True),
+    (3909, 960, 540, 0.02, 2, None, True),
+    (3910, 480, 270, 0.10, 2, "case_00170", True),
+    (3911, 960, 540, 0.10, 2, None, True),
+    (3912, 480, 270, 0.03, 4, None, False),
+]
 TEST = [
     (3701, 960, 540, 0.05, 2, None, True),
     (3702, 960, 540, 0.03, 2, "case_00170", True),
