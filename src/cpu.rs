@@ -5,55 +5,30 @@
 //! Best effort: the check runs before any of the fit's code, but the compiler may use the
 //! instructions anywhere, so a CPU lacking them can still fail before it.
 
-/// The x86-64 features beyond the baseline (SSE2) that the compiler may use on its own, with
-/// whether this binary was compiled with each.
+/// One list of names gives both [`COMPILED`] and [`detected`]: `is_x86_feature_detected!`
+/// takes only literals, and two lists kept apart could drift.
 #[cfg(target_arch = "x86_64")]
-const COMPILED: &[(&str, bool)] = &[
-    ("sse3", cfg!(target_feature = "sse3")),
-    ("ssse3", cfg!(target_feature = "ssse3")),
-    ("sse4.1", cfg!(target_feature = "sse4.1")),
-    ("sse4.2", cfg!(target_feature = "sse4.2")),
-    ("popcnt", cfg!(target_feature = "popcnt")),
-    ("avx", cfg!(target_feature = "avx")),
-    ("avx2", cfg!(target_feature = "avx2")),
-    ("fma", cfg!(target_feature = "fma")),
-    ("bmi1", cfg!(target_feature = "bmi1")),
-    ("bmi2", cfg!(target_feature = "bmi2")),
-    ("lzcnt", cfg!(target_feature = "lzcnt")),
-    ("f16c", cfg!(target_feature = "f16c")),
-    ("movbe", cfg!(target_feature = "movbe")),
-    ("avx512f", cfg!(target_feature = "avx512f")),
-    ("avx512bw", cfg!(target_feature = "avx512bw")),
-    ("avx512cd", cfg!(target_feature = "avx512cd")),
-    ("avx512dq", cfg!(target_feature = "avx512dq")),
-    ("avx512vl", cfg!(target_feature = "avx512vl")),
-];
+macro_rules! features {
+    ($($name:tt),* $(,)?) => {
+        /// The x86-64 features beyond the baseline (SSE2) that the compiler may use on its
+        /// own, with whether this binary was compiled with each.
+        const COMPILED: &[(&str, bool)] = &[$(($name, cfg!(target_feature = $name))),*];
 
-/// Whether the running CPU has `feature`; `None` for a name not among [`COMPILED`]'s.
-#[cfg(target_arch = "x86_64")]
-fn detected(feature: &str) -> Option<bool> {
-    Some(match feature {
-        "sse3" => is_x86_feature_detected!("sse3"),
-        "ssse3" => is_x86_feature_detected!("ssse3"),
-        "sse4.1" => is_x86_feature_detected!("sse4.1"),
-        "sse4.2" => is_x86_feature_detected!("sse4.2"),
-        "popcnt" => is_x86_feature_detected!("popcnt"),
-        "avx" => is_x86_feature_detected!("avx"),
-        "avx2" => is_x86_feature_detected!("avx2"),
-        "fma" => is_x86_feature_detected!("fma"),
-        "bmi1" => is_x86_feature_detected!("bmi1"),
-        "bmi2" => is_x86_feature_detected!("bmi2"),
-        "lzcnt" => is_x86_feature_detected!("lzcnt"),
-        "f16c" => is_x86_feature_detected!("f16c"),
-        "movbe" => is_x86_feature_detected!("movbe"),
-        "avx512f" => is_x86_feature_detected!("avx512f"),
-        "avx512bw" => is_x86_feature_detected!("avx512bw"),
-        "avx512cd" => is_x86_feature_detected!("avx512cd"),
-        "avx512dq" => is_x86_feature_detected!("avx512dq"),
-        "avx512vl" => is_x86_feature_detected!("avx512vl"),
-        _ => return None,
-    })
+        /// Whether the running CPU has `feature`; `None` for a name not among [`COMPILED`]'s.
+        fn detected(feature: &str) -> Option<bool> {
+            Some(match feature {
+                $($name => is_x86_feature_detected!($name),)*
+                _ => return None,
+            })
+        }
+    };
 }
+
+#[cfg(target_arch = "x86_64")]
+features!(
+    "sse3", "ssse3", "sse4.1", "sse4.2", "popcnt", "avx", "avx2", "fma", "bmi1", "bmi2", "lzcnt",
+    "f16c", "movbe", "avx512f", "avx512bw", "avx512cd", "avx512dq", "avx512vl",
+);
 
 /// The compiled-in features that `has` says the CPU lacks.
 #[cfg(target_arch = "x86_64")]

@@ -335,6 +335,7 @@ fn edge_bow(camera: &Camera, a: &Corner, b: &Corner) -> f64 {
 /// pinhole projection of the centroid). The disk of radius R holds the whole triangle (it is
 /// convex and holds the corners), and inside the fold's cheap bound every point projects.
 struct StraightnessBound {
+    /// The radial coefficients' absolute values.
     k1: f64,
     k2: f64,
     k3: f64,
@@ -344,8 +345,6 @@ struct StraightnessBound {
     focal_px: f64,
     /// Half the tolerance (px): what the bound must stay under, rounding far below the rest.
     limit_px: f64,
-    /// Three radial terms' absolute values for the fold's cheap bound.
-    fold: [f64; 3],
 }
 
 impl StraightnessBound {
@@ -358,7 +357,6 @@ impl StraightnessBound {
             tangential: 10.0 * (intr.p1.abs() + intr.p2.abs()),
             focal_px: intr.fx.abs().max(intr.fy.abs()),
             limit_px: 0.5 * tolerance_px,
-            fold: [3.0 * k1, 5.0 * k2, 7.0 * k3],
         }
     }
 
@@ -378,7 +376,7 @@ impl StraightnessBound {
         // Inside Intrinsics::inside_fold's cheap bound (every point of the disk projects).
         // The corners reaching here were projected, so they are finite (`f64::max` would
         // pass over a NaN); `fold` and the edge lengths are checked so that NaN fails anyway.
-        let fold = s * (self.fold[0] + s * (self.fold[1] + s * self.fold[2]));
+        let fold = s * (3.0 * self.k1 + s * (5.0 * self.k2 + s * 7.0 * self.k3));
         if fold.is_nan() || fold >= 0.5 {
             return None;
         }

@@ -124,7 +124,6 @@ pub fn timeline(shown: &Shown, layout: &mut Layout, ui: &mut egui::Ui) {
         }
         // No tooltip: it opened under the pointer, over the buttons below the strip, whenever
         // the pointer crossed it. What the strip shows is in the Help sheet's first steps.
-        let _ = response;
         ui.horizontal(|ui| {
             let ctx = ui.ctx().clone();
             for (a, icon) in [
