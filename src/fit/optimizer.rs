@@ -235,7 +235,15 @@ fn add_priors<'a>(
     eq: &mut NormalEquations,
 ) -> BlockPriors<'a> {
     let pose = |eq: &mut NormalEquations| {
-        let damping = PoseDamping::new(block, prev, centre, params.priors.pose_damping, &eq.h)?;
+        let priors = &params.priors;
+        let damping = PoseDamping::new(
+            block,
+            prev,
+            centre,
+            priors.pose_damping,
+            priors.pose_damping_depth,
+            &eq.h,
+        )?;
         damping.add_normal_equations(state, eq);
         Some(damping)
     };

@@ -48,12 +48,14 @@ pub struct PoseDamping {
 
 impl PoseDamping {
     /// The damping of `block` (None unless rigid or affine) towards `previous`, `weight` times
-    /// the curvature of `h`.
+    /// the curvature of `h`, and depth (the translation along the camera's axis) `depth_weight`
+    /// times its curvature.
     pub fn new(
         block: Block,
         previous: &FitState,
         centre_pre: DVec3,
         weight: f64,
+        depth_weight: f64,
         h: &DMatrix<f64>,
     ) -> Option<Self> {
         let linear = match block {
@@ -63,9 +65,13 @@ impl PoseDamping {
         };
         let translation = linear.end..linear.end + 3;
         let group = mean_diagonal(h, linear.clone());
+        let depth = translation.end - 1;
         let lambda = linear
             .map(|_| weight * group)
-            .chain(translation.map(|k| weight * h[(k, k)]))
+            .chain(translation.map(|k| {
+                let w = if k == depth { depth_weight } else { weight };
+                w * h[(k, k)]
+            }))
             .collect();
         Some(Self {
             block,
@@ -376,7 +382,7 @@ mod tests {
     fn priors_add_the_gradient_of_their_own_energy() {
         let (state, previous, h) = states();
         let centre = DVec3::new(1.0, 2.0, -3.0);
-        let affine = PoseDamping::new(Block::Affine, &previous, centre, 0.7, &h).unwrap();
+        let affine = PoseDamping::new(Block::Affine, &previous, centre, 0.7, 2.5, &h).unwrap();
         check(&affine, &state, Block::Affine, 12, 1e-6);
         check(
             &StrainPrior::new(1.3, 1.0, &h),
@@ -411,7 +417,7 @@ mod tests {
         );
         // The rigid block's rotation deviation is taken to move one for one with the increment:
         // exact at zero deviation, off by O(|deviation|²) elsewhere (here 0.015 rad).
-        let rigid = PoseDamping::new(Block::Rigid, &previous, centre, 0.7, &h).unwrap();
+        let rigid = PoseDamping::new(Block::Rigid, &previous, centre, 0.7, 2.5, &h).unwrap();
         let mut near = previous.clone();
         near.affine = Affine::from_linear_translation(
             rotation_from_vector(DVec3::new(0.01, -0.01, 0.005)) * previous.affine.linear(),
@@ -424,5 +430,24 @@ mod tests {
             CameraDamping::new(&previous, 1.0, [1.0; 5], &h).energy(&previous),
             0.0
         );
+    }
+
+    /// Depth's own weight reaches the translation along the camera's axis and nothing else: in
+    /// both blocks the last parameter (q12, or the centre's z shift).
+    #[test]
+    fn depth_has_its_own_pose_damping() {
+        let (_, previous, h) = states();
+        let centre = DVec3::new(1.0, 2.0, -3.0);
+        for (block, n) in [(Block::Affine, 12), (Block::Rigid, 6)] {
+            let same = PoseDamping::new(block, &previous, centre, 0.7, 0.7, &h).unwrap();
+            let firm = PoseDamping::new(block, &previous, centre, 0.7, 7.0, &h).unwrap();
+            for k in 0..n - 1 {
+                assert_eq!(same.lambda[k], firm.lambda[k], "{block:?}[{k}]");
+            }
+            assert!(same.lambda[n - 1] > 0.0);
+            assert!(
+                (firm.lambda[n - 1] - 10.0 * same.lambda[n - 1]).abs() < 1e-9 * firm.lambda[n - 1]
+            );
+        }
     }
 }

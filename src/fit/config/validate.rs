@@ -106,6 +106,7 @@ impl FitConfig {
         let p = &self.priors;
         for (field, v) in [
             ("priors.pose_damping", p.pose_damping),
+            ("priors.pose_damping_depth", p.pose_damping_depth),
             ("priors.strain", p.strain),
             ("priors.strain_scale", p.strain_scale),
             ("priors.shape", p.shape),
