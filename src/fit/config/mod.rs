@@ -110,12 +110,12 @@ pub struct PriorConfig {
     /// 2026-12-07, each tracked frame moved about halfway to where its data put it, and a
     /// steady motion left the pose behind by millimetres. On KiTS case_00023 (tuning scene
     /// 3505, breathing moving it 6 mm across the view in 20 frames) the kidney followed half of
-    /// it and the hidden tumour erred 5.0 mm on average (6.1 worst); 2.9 (3.5) at 0.3. Over 28
+    /// it and the hidden tumour erred 5.0 mm on average (6.1 worst); 3.3 (3.9) at 0.3. Over 28
     /// tuning scenes of `benches/fit_heldout.py` (3501–3512, 3701–3712, 403, 1301, 1309, 2102;
-    /// LSC), 1 / 0.3 / 0.1 with depth at 1 and the zoom's weights kept (below): hidden tumour
-    /// 1.71 / 1.49 / 1.49 mm on average, each scene's worst frame 2.60 / 2.39 / 2.48 mm on
-    /// average, worst of all 6.13 / 4.09 / 4.33; Dice 0.958 / 0.960 / 0.959; fx error 0.84 /
-    /// 0.84 / 0.85 %; k1 error at most 0.021 / 0.020 / 0.019.
+    /// LSC), 1 → 0.3 with the depth and the zoom's weights below: hidden tumour 1.71 → 1.54 mm
+    /// on average, each scene's worst frame 2.60 → 2.47 mm on average, worst of all 6.13 →
+    /// 3.95; Dice 0.958 → 0.960; fx error 0.84 → 0.83 %; k1 error at most 0.021 → 0.020 (the
+    /// README's fit section has the other weights tried).
     pub pose_damping: f64,
     /// The same for the translation along camera 0's axis (depth): silhouettes see depth only
     /// through size and stereo through disparity, and with noise 0.10 (tuning scene 3704) depth
