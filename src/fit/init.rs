@@ -1,8 +1,9 @@
 //! Where a run starts. Automatic initialisation when a scene gives no `initial_pose`: the
 //! forest's probability maps of the first frame locate the organ (centroid and area in every
 //! view); orientation
-//! hypotheses (26 view directions × 8 rolls) are placed on the centroid's ray at the depth their
-//! silhouette area implies and scored by soft overlap with the forest's foreground in all views;
+//! hypotheses (60 view directions × 12 rolls) are placed on the centroid's ray at the depth their
+//! silhouette area implies, moved so that their silhouette's centroid falls on the region's,
+//! and scored by soft overlap with the forest's foreground in all views;
 //! the best few are refined by a coarse rigid fit and the most confident, per structure, wins;
 //! where a run starts, the winner is also turned ±20° about each camera axis and refined again
 //! (the refinement can stop short of the truth as a kidney turns about its long axis).
@@ -198,6 +199,7 @@ pub fn automatic_pose(
         Affine::from_linear_translation(rot, ray * depth - rot * centre_pre)
     };
     let mut scored: Vec<(f64, Affine)> = Vec::new();
+    let centring = placement.silhouette_centring;
     let roll_angle = std::f64::consts::TAU / placement.rolls.max(1) as f64;
     for d in directions(placement.directions) {
         stop_if_cancelled(refiner.cancel)?;
@@ -206,11 +208,28 @@ pub fn automatic_pose(
             // Depth from the area: projected area falls with the square of depth.
             let z_ref = placement.reference_depth_mm;
             let reference = rasters(&place(rot, z_ref), &cams[..1]);
-            let a_ref = reference[0].coverage().count() as f64;
+            let covered = reference[0].coverage();
+            let a_ref = covered.count() as f64;
             if a_ref < 1.0 {
                 continue;
             }
-            let affine = place(rot, z_ref * (a_ref / area).sqrt());
+            let depth = z_ref * (a_ref / area).sqrt();
+            let mut affine = place(rot, depth);
+            if centring > 0.0 {
+                // The silhouette's centroid, not the model's centre, on the region's centroid:
+                // a large exophytic tumour pulls the one away from the other.
+                let mut c_ref = DVec2::ZERO;
+                for (i, _) in covered.data.iter().enumerate().filter(|(_, c)| **c) {
+                    c_ref += DVec2::new((i % covered.width) as f64, (i / covered.width) as f64);
+                }
+                let off = (c_ref / a_ref - centre) * centring;
+                let k = &cams[0].intrinsics;
+                let shift = DVec3::new(-off.x * z_ref / k.fx, -off.y * z_ref / k.fy, 0.0);
+                affine = Affine::from_linear_translation(
+                    affine.linear(),
+                    affine.translation_mm() + shift,
+                );
+            }
             scored.push((score(&rasters(&affine, &cams)), affine));
         }
     }

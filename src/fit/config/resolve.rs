@@ -195,7 +195,7 @@ pub enum ConfigFileError {
 /// own still gets). Knobs added earlier (e.g. `zoom.detector.warmup_frames`,
 /// `tracking.reinit_max_jump_mm`) are not listed: a metrics.json from before them replays
 /// with today's value. Every knob added from now on with such a default belongs here.
-const BEFORE_IT_EXISTED: [(&str, &str, f64); 4] = [
+const BEFORE_IT_EXISTED: [(&str, &str, f64); 5] = [
     // 2026-12-06, thirteenth session.
     ("placement", "polish_deg", 0.0),
     // 2026-12-06, fourteenth session.
@@ -204,6 +204,8 @@ const BEFORE_IT_EXISTED: [(&str, &str, f64); 4] = [
     ("hidden_region", "rim_residual_floor_mm", 0.0),
     // 2026-12-06, sixteenth session.
     ("hidden_region", "model_error_per_confidence_shortfall", 0.0),
+    // 2026-12-07, twenty-third session.
+    ("placement", "silhouette_centring", 0.0),
 ];
 
 /// What `track --config` reads: a configuration, and where the file is a run's metrics.json,

@@ -225,6 +225,11 @@ impl FitConfig {
         within("placement.refined", pl.refined, 1..=1000)?;
         within("placement.polish_deg", pl.polish_deg, 0.0..=90.0)?;
         within(
+            "placement.silhouette_centring",
+            pl.silhouette_centring,
+            0.0..=1.0,
+        )?;
+        within(
             "placement.initial_polish_deg",
             pl.initial_polish_deg,
             0.0..=90.0,
