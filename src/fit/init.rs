@@ -92,6 +92,34 @@ fn class_planes(appearance: &Appearance, frame: &image::RgbImage) -> (Plane<f32>
     (planes[0].map(|&p| 1.0 - p), planes)
 }
 
+/// Mean pixel position of a mask's set pixels; None where none is set.
+fn centroid_px(mask: &Plane<bool>) -> Option<DVec2> {
+    let (mut sum, mut n) = (DVec2::ZERO, 0usize);
+    for (i, _) in mask.data.iter().enumerate().filter(|(_, m)| **m) {
+        sum += DVec2::new((i % mask.width) as f64, (i / mask.width) as f64);
+        n += 1;
+    }
+    (n > 0).then(|| sum / n as f64)
+}
+
+/// `affine` moved across camera 0's axis so that a silhouette seen `offset_px` from where it
+/// should be, when the model stood at depth `seen_at_mm`, comes back there at any depth: the
+/// offset is one of the model's own millimetres (offset × depth / f), which it keeps however
+/// far it is placed.
+fn shifted_across(
+    affine: &Affine,
+    offset_px: DVec2,
+    seen_at_mm: f64,
+    k: &crate::geometry::Intrinsics,
+) -> Affine {
+    let shift = DVec3::new(
+        -offset_px.x * seen_at_mm / k.fx,
+        -offset_px.y * seen_at_mm / k.fy,
+        0.0,
+    );
+    Affine::from_linear_translation(affine.linear(), affine.translation_mm() + shift)
+}
+
 fn soft_iou(prob: &Plane<f32>, silhouette: &Plane<bool>) -> f64 {
     let (mut inter, mut sp, mut ss) = (0.0, 0.0, 0.0);
     for (&p, &s) in prob.data.iter().zip(&silhouette.data) {
@@ -215,19 +243,16 @@ pub fn automatic_pose(
             }
             let depth = z_ref * (a_ref / area).sqrt();
             let mut affine = place(rot, depth);
-            if centring > 0.0 {
+            if centring > 0.0
+                && let Some(c_ref) = centroid_px(&covered)
+            {
                 // The silhouette's centroid, not the model's centre, on the region's centroid:
                 // a large exophytic tumour pulls the one away from the other.
-                let mut c_ref = DVec2::ZERO;
-                for (i, _) in covered.data.iter().enumerate().filter(|(_, c)| **c) {
-                    c_ref += DVec2::new((i % covered.width) as f64, (i / covered.width) as f64);
-                }
-                let off = (c_ref / a_ref - centre) * centring;
-                let k = &cams[0].intrinsics;
-                let shift = DVec3::new(-off.x * z_ref / k.fx, -off.y * z_ref / k.fy, 0.0);
-                affine = Affine::from_linear_translation(
-                    affine.linear(),
-                    affine.translation_mm() + shift,
+                affine = shifted_across(
+                    &affine,
+                    (c_ref - centre) * centring,
+                    z_ref,
+                    &cams[0].intrinsics,
                 );
             }
             scored.push((score(&rasters(&affine, &cams)), affine));
@@ -515,5 +540,72 @@ mod tests {
             let (a, b) = (affine.apply(p), turned.apply(p));
             assert!(((b - centre).length() - (a - centre).length()).abs() < 1e-9);
         }
+    }
+
+    /// The centring a hypothesis gets, against brute force: a kidney-like sphere beside a
+    /// large one (an exophytic tumour) is placed with the model's centre on a pixel's ray,
+    /// rastered at the reference depth, moved by [`shifted_across`] and rastered again at the
+    /// depth it is placed at: its silhouette's centroid then lies on that pixel (within the
+    /// perspective the shift leaves out), where unmoved it was pixels away.
+    #[test]
+    fn a_centred_hypothesis_puts_its_silhouette_on_the_regions_centroid() {
+        use crate::geometry::mesh::{Mesh, icosphere};
+        use crate::geometry::{Extrinsics, Intrinsics};
+        use crate::render::raster::RenderObject;
+        let cam = Camera {
+            name: "t".into(),
+            width: 120,
+            height: 68,
+            intrinsics: Intrinsics::pinhole(126.0, 126.0, 59.5, 33.5),
+            extrinsics: Extrinsics::default(),
+        };
+        let sphere = |c: DVec3, r: f64| {
+            let s = icosphere(3);
+            Mesh::new(s.vertices.iter().map(|&v| c + v * r).collect(), s.faces)
+        };
+        // The model's centre (the kidney's) at the origin, the tumour beside and before it.
+        // Its parallax is what the shift leaves out (the nearer tumour moves more than the
+        // kidney): the centred silhouette lands 0.7 px from the pixel at 150 mm (23 px
+        // unmoved) and 1.8 px at 200 mm (15 px); the refinement takes the rest. A shift
+        // without the reference depth's scaling lands 5.1 px off at 150 mm, one the wrong
+        // way round 33 px (both tried).
+        let meshes = [
+            sphere(DVec3::ZERO, 30.0),
+            sphere(DVec3::new(38.0, -14.0, -25.0), 28.0),
+        ];
+        let raster = |a: &Affine| {
+            let posed: Vec<Vec<DVec3>> = meshes
+                .iter()
+                .map(|m| m.vertices.iter().map(|&v| a.apply(v)).collect())
+                .collect();
+            let objects: Vec<RenderObject> = posed
+                .iter()
+                .zip(&meshes)
+                .map(|(v, m)| RenderObject {
+                    vertices: v,
+                    faces: &m.faces,
+                    closed: true,
+                })
+                .collect();
+            rasterize(&cam, &objects, &RasterOptions::default()).coverage()
+        };
+        let target = DVec2::new(52.0, 37.0);
+        let ray = cam.intrinsics.unproject(target);
+        let ray = DVec3::new(ray.x, ray.y, 1.0);
+        let z_ref = 200.0;
+        let at = |z: f64| Affine::from_linear_translation(DMat3::IDENTITY, ray * z);
+        let seen = centroid_px(&raster(&at(z_ref))).expect("in view");
+        assert!((seen - target).length() > 4.0, "the tumour pulls it {seen}");
+        for z in [150.0, 200.0] {
+            let unmoved = centroid_px(&raster(&at(z))).unwrap();
+            let moved = shifted_across(&at(z), seen - target, z_ref, &cam.intrinsics);
+            let centred = centroid_px(&raster(&moved)).unwrap();
+            assert!(
+                (centred - target).length() < 0.15 * (unmoved - target).length()
+                    && (centred - target).length() < 3.0,
+                "at {z} mm: {centred} against {target} (unmoved {unmoved})"
+            );
+        }
+        assert!(centroid_px(&Plane::filled(4, 3, false)).is_none());
     }
 }
