@@ -184,18 +184,12 @@ pub fn automatic_pose(
             )
         })
         .collect();
-    let p0 = &probs[0];
-    let (mut area, mut centre) = (0.0, DVec2::ZERO);
-    for (i, &p) in p0.data.iter().enumerate() {
-        if p > 0.5 {
-            area += 1.0;
-            centre += DVec2::new((i % p0.width) as f64, (i / p0.width) as f64);
-        }
-    }
-    if area < placement.min_area_px {
-        return Err(InputError::new(&scene.origin, format!("cannot find the organ in frame {t} to place the model automatically: add seeds, or give an initial_pose")).into());
-    }
-    centre /= area;
+    let foreground = probs[0].map(|&p| p > 0.5);
+    let area = foreground.count() as f64;
+    let centre = match centroid_px(&foreground) {
+        Some(c) if area >= placement.min_area_px => c,
+        _ => return Err(InputError::new(&scene.origin, format!("cannot find the organ in frame {t} to place the model automatically: add seeds, or give an initial_pose")).into()),
+    };
     let ray = cams[0].intrinsics.unproject(centre);
     let ray = DVec3::new(ray.x, ray.y, 1.0);
     let (mean, centre_pre) = (&refiner.mean, refiner.centre_pre);

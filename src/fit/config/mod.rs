@@ -159,6 +159,21 @@ pub struct PriorConfig {
     pub camera_relative: [f64; 5],
 }
 
+impl PriorConfig {
+    /// One pose damping for every direction, depth included (the first frame's and the
+    /// placement's own).
+    pub fn hold_pose_at(&mut self, weight: f64) {
+        self.pose_damping = weight;
+        self.pose_damping_depth = weight;
+    }
+
+    /// Both pose dampings `factor` times what they are (inside a zoom).
+    pub fn scale_pose_damping(&mut self, factor: f64) {
+        self.pose_damping *= factor;
+        self.pose_damping_depth *= factor;
+    }
+}
+
 impl Default for PriorConfig {
     fn default() -> Self {
         Self {

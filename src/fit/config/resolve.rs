@@ -83,8 +83,7 @@ impl FitConfig {
                     .map(|k| fit_level + k)
                     .collect();
                 (p.rounds, p.steps, p.rebuild_every) = (f.rounds, f.steps, f.rebuild_every);
-                p.priors.pose_damping = f.pose_damping;
-                p.priors.pose_damping_depth = f.pose_damping;
+                p.priors.hold_pose_at(f.pose_damping);
                 p.stereo.search_px = f.stereo_search_px;
             }
             Phase::Tracked => {
@@ -98,21 +97,16 @@ impl FitConfig {
                 p.mode = Mode::R;
                 p.levels = f.levels.clone();
                 (p.rounds, p.steps, p.rebuild_every) = (f.rounds, f.steps, f.rebuild_every);
-                p.priors.pose_damping = f.pose_damping;
-                p.priors.pose_damping_depth = f.pose_damping;
+                p.priors.hold_pose_at(f.pose_damping);
             }
         }
         let z = &self.zoom;
         match zoom {
             Zoom::Off => {}
-            Zoom::PoseOnly => {
-                p.priors.pose_damping *= z.pose_only_damping_factor;
-                p.priors.pose_damping_depth *= z.pose_only_damping_factor;
-            }
+            Zoom::PoseOnly => p.priors.scale_pose_damping(z.pose_only_damping_factor),
             Zoom::Cameras if p.mode == Mode::LSC => {
                 p.correct_cameras = true;
-                p.priors.pose_damping *= z.cameras_pose_damping_factor;
-                p.priors.pose_damping_depth *= z.cameras_pose_damping_factor;
+                p.priors.scale_pose_damping(z.cameras_pose_damping_factor);
                 p.priors.shape_damping = p.priors.shape_damping.max(z.cameras_shape_damping);
                 p.rounds = p.rounds.max(z.cameras_min_rounds);
                 p.rebuild_every = p.rebuild_every.min(z.cameras_rebuild_every);
