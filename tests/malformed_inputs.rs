@@ -1499,5 +1499,14 @@ fn malformed_fit_configs() {
             &["malformed fit configuration"],
             move |r| track(r, r#"{"priors": {"camera_relative": [-1]}}"#),
         ),
+        case(
+            "config-too-few-lines",
+            "fit.json",
+            &[
+                "energy.max_lines_per_structure",
+                "0 (no limit) or lie in 8..=1000000",
+            ],
+            move |r| track(r, r#"{"energy": {"max_lines_per_structure": 3}}"#),
+        ),
     ]);
 }

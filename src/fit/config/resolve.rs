@@ -189,7 +189,7 @@ pub enum ConfigFileError {
 /// own still gets). Knobs added earlier (e.g. `zoom.detector.warmup_frames`,
 /// `tracking.reinit_max_jump_mm`) are not listed: a metrics.json from before them replays
 /// with today's value. Every knob added from now on with such a default belongs here.
-const BEFORE_IT_EXISTED: [(&str, &str, f64); 5] = [
+const BEFORE_IT_EXISTED: [(&str, &str, f64); 6] = [
     // 2026-12-06, thirteenth session.
     ("placement", "polish_deg", 0.0),
     // 2026-12-06, fourteenth session.
@@ -200,6 +200,8 @@ const BEFORE_IT_EXISTED: [(&str, &str, f64); 5] = [
     ("hidden_region", "model_error_per_confidence_shortfall", 0.0),
     // 2026-12-07, twenty-third session.
     ("placement", "silhouette_centring", 0.0),
+    // 2026-12-07, twenty-fourth session.
+    ("energy", "max_lines_per_structure", 0.0),
 ];
 
 /// What `track --config` reads: a configuration, and where the file is a run's metrics.json,
@@ -245,7 +247,15 @@ impl RecordedRun {
                     .entry(section)
                     .or_insert_with(|| serde_json::json!({}));
                 if let Some(keys) = section.as_object_mut() {
-                    keys.entry(key).or_insert_with(|| before.into());
+                    // A whole number as an integer: counts (usize) refuse 0.0, and the
+                    // floating-point knobs read 0 as well as 0.0.
+                    keys.entry(key).or_insert_with(|| {
+                        if before.fract() == 0.0 && before.abs() < 1e15 {
+                            (before as i64).into()
+                        } else {
+                            before.into()
+                        }
+                    });
                 }
             }
         }

@@ -69,6 +69,7 @@ impl FrameContext<'_> {
                 let mut view_lines = Vec::new();
                 let rim_started = crate::fit::profile::enabled().then(std::time::Instant::now);
                 for (oi, &si) in visible.iter().enumerate() {
+                    let first_line = view_lines.len();
                     let st = &self.model.structures[si];
                     let verts = &posed[si];
                     // Which faces look at the camera: once per face, not once per edge side.
@@ -169,8 +170,10 @@ impl FrameContext<'_> {
                             t,
                             normal: n,
                             samples,
+                            weight: 1.0,
                         });
                     }
+                    thin_evenly(&mut view_lines, first_line, params.max_lines_per_structure);
                 }
                 if let Some(t) = rim_started {
                     crate::fit::profile::add(crate::fit::profile::Phase::Rim, t.elapsed());
@@ -215,5 +218,127 @@ impl FrameContext<'_> {
                 }
             });
         (lines.into_iter().flatten().collect(), rasters)
+    }
+}
+
+/// Keeps at most `budget` of `lines[first..]` (one structure's lines in one view; 0: all),
+/// spread evenly by their contour points' angle around the lines' mean, each kept line
+/// weighing for the lines it stands for (`count / kept` in all). The rim's edges come in the
+/// mesh's order, which says nothing of where they lie; sorted by angle, every `count / budget`-th
+/// line is a stratified sample of the contour, concave dents included.
+fn thin_evenly(lines: &mut Vec<super::Line>, first: usize, budget: usize) {
+    let count = lines.len() - first;
+    if budget == 0 || count <= budget {
+        return;
+    }
+    let centre_of = |l: &super::Line| l.samples[l.samples.len() / 2].pos;
+    let mean = lines[first..]
+        .iter()
+        .map(centre_of)
+        .fold(DVec2::ZERO, |a, p| a + p)
+        / count as f64;
+    let mut order: Vec<(f64, usize)> = lines[first..]
+        .iter()
+        .enumerate()
+        .map(|(i, l)| {
+            let d = centre_of(l) - mean;
+            (d.y.atan2(d.x), i)
+        })
+        .collect();
+    order.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    // The k-th kept line is the middle one of the k-th of `budget` equal runs of the order.
+    let mut keep: Vec<usize> = (0..budget)
+        .map(|k| order[((2 * k + 1) * count) / (2 * budget)].1)
+        .collect();
+    keep.sort_unstable();
+    let weight = count as f64 / budget as f64;
+    let mut kept: Vec<super::Line> = Vec::with_capacity(budget);
+    let mut tail = lines.split_off(first).into_iter().enumerate();
+    for &k in &keep {
+        for (i, mut line) in tail.by_ref() {
+            if i == k {
+                line.weight *= weight;
+                kept.push(line);
+                break;
+            }
+        }
+    }
+    lines.extend(kept);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fit::lines::{Line, Sample};
+
+    /// A line whose middle sample lies at `at` (what the thinning sorts by).
+    fn line_at(at: DVec2, structure: usize) -> Line {
+        let mut line = Line::for_tests(
+            DVec2::X,
+            (-2..=2)
+                .map(|k| Sample {
+                    pos: at + DVec2::X * k as f64,
+                    pixel: 0,
+                    g_f: 0.0,
+                    g_b: 0.0,
+                    p_f: 0.0,
+                })
+                .collect(),
+        );
+        line.structure = structure;
+        line
+    }
+
+    /// 200 lines round a circle, in a scrambled order (as a mesh's edges come), thinned to
+    /// 50: the kept lines weigh 200 in all, and no two neighbours round the circle lie more
+    /// than one kept line's share apart; the structure before them is left alone, and a budget
+    /// of 0 or one the rim does not exceed keeps every line at weight 1.
+    #[test]
+    fn thinning_keeps_the_total_weight_and_spreads_the_lines_evenly() {
+        let angle = |i: usize| (i * 37 % 200) as f64 * std::f64::consts::TAU / 200.0;
+        let mut lines: Vec<Line> = (0..10)
+            .map(|i| line_at(DVec2::splat(i as f64), 0))
+            .collect();
+        lines.extend((0..200).map(|i| {
+            line_at(
+                DVec2::new(300.0 + 80.0 * angle(i).cos(), 200.0 + 80.0 * angle(i).sin()),
+                1,
+            )
+        }));
+        let untouched = lines.clone();
+        for budget in [0, 200, 500] {
+            let mut same = untouched.clone();
+            thin_evenly(&mut same, 10, budget);
+            assert_eq!(same.len(), 210, "budget {budget}");
+            assert!(same.iter().all(|l| l.weight == 1.0), "budget {budget}");
+        }
+        thin_evenly(&mut lines, 10, 50);
+        assert_eq!(lines.len(), 60);
+        assert!(
+            lines[..10]
+                .iter()
+                .all(|l| l.structure == 0 && l.weight == 1.0)
+        );
+        let kept = &lines[10..];
+        assert!(kept.iter().all(|l| l.structure == 1));
+        let total: f64 = kept.iter().map(|l| l.weight).sum();
+        assert!((total - 200.0).abs() < 1e-9, "total weight {total}");
+        let mut angles: Vec<f64> = kept
+            .iter()
+            .map(|l| {
+                let d = l.samples[2].pos - DVec2::new(300.0, 200.0);
+                d.y.atan2(d.x)
+            })
+            .collect();
+        angles.sort_by(f64::total_cmp);
+        let share = std::f64::consts::TAU / 50.0;
+        let mut gaps: Vec<f64> = angles.windows(2).map(|w| w[1] - w[0]).collect();
+        gaps.push(angles[0] + std::f64::consts::TAU - angles[angles.len() - 1]);
+        for g in gaps {
+            assert!(
+                (g - share).abs() < 1e-6,
+                "gap {g} rad, against {share} for even spacing"
+            );
+        }
     }
 }
