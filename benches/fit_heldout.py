@@ -357,6 +357,22 @@ TEST = [
     (4311, 960, 540, 0.10, 2, None, True),
     (4312, 480, 270, 0.03, 4, None, False),
 ]
+# The twenty-first, fixed on 2026-12-07 (twenty-fourth session) before 4301-4312 were run:
+# the next test set once those have been reported and joined the tuning set.
+NEXT_TEST = [
+    (4501, 960, 540, 0.05, 2, None, True),
+    (4502, 960, 540, 0.03, 2, "case_00170", True),
+    (4503, 960, 540, 0.08, 2, None, False),
+    (4504, 480, 270, 0.10, 2, None, True),
+    (4505, 480, 270, 0.03, 2, "case_00023", True),
+    (4506, 480, 270, 0.05, 2, None, True),
+    (4507, 480, 270, 0.08, 2, "case_00003", False),
+    (4508, 480, 270, 0.05, 4, None, True),
+    (4509, 960, 540, 0.02, 2, None, True),
+    (4510, 480, 270, 0.10, 2, "case_00010", True),
+    (4511, 960, 540, 0.10, 2, None, True),
+    (4512, 480, 270, 0.03, 4, None, False),
+]
 FRAMES = 40
 
 
