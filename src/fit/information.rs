@@ -131,7 +131,7 @@ pub fn joint_information(
     let rotation_centre = ctx.rotation_centre(state, &deformed);
     // Each line's row in parallel (its Jacobians are the cost), added up in the lines' order:
     // the same matrix as a serial loop, bit for bit, however many threads.
-    let line_rows: Vec<Option<(Vec<f64>, f64, f64, f64)>> = lines
+    let line_rows: Vec<Option<(Vec<f64>, f64, f64)>> = lines
         .par_iter()
         .map(|line| {
             let mut row = Vec::with_capacity(n);
@@ -146,12 +146,13 @@ pub fn joint_information(
                 ctx.line_jacobian(line, state, &deformed, cameras, ep.level, rotation_centre)?;
             row.extend(shared_camera_row(ctx, &j, state));
             let (shift, variance) = target::line_target(line, c.unwrap_or(at), ep);
-            Some((row, shift, variance, line.weight))
+            Some((row, shift, variance))
         })
         .collect();
     let (mut shift2, mut shifts) = (0.0, 0usize);
-    for (row, shift, variance, weight) in line_rows.into_iter().flatten() {
-        add_row(&mut h, &row, weight / variance);
+    let weighed = lines.iter().zip(line_rows);
+    for (line, (row, shift, variance)) in weighed.filter_map(|(l, r)| Some((l, r?))) {
+        add_row(&mut h, &row, line.weight / variance);
         if variance != ep.saturated_line_variance_px2 && shift.is_finite() {
             shift2 += shift * shift;
             shifts += 1;
