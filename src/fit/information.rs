@@ -149,18 +149,19 @@ pub fn joint_information(
             Some((row, shift, variance))
         })
         .collect();
-    let (mut shift2, mut shifts) = (0.0, 0usize);
+    // The rim residual's mean square counts each line as the rim lines it stands for.
+    let (mut shift2, mut shifts) = (0.0, 0.0);
     let weighed = lines.iter().zip(line_rows);
     for (line, (row, shift, variance)) in weighed.filter_map(|(l, r)| Some((l, r?))) {
         add_row(&mut h, &row, line.weight / variance);
         if variance != ep.saturated_line_variance_px2 && shift.is_finite() {
-            shift2 += shift * shift;
-            shifts += 1;
+            shift2 += line.weight * shift * shift;
+            shifts += line.weight;
         }
     }
-    if shifts > 0 {
+    if shifts > 0.0 {
         let level_px = 1.0 / crate::geometry::camera::level_scale(ep.level);
-        info.rim_residual_px = level_px * (shift2 / shifts as f64).sqrt();
+        info.rim_residual_px = level_px * (shift2 / shifts).sqrt();
     }
     if !stereo.matches.is_empty() {
         let term = StereoTerm::new(ctx, stereo, state, &deformed, params.stereo);

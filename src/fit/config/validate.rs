@@ -101,12 +101,17 @@ impl FitConfig {
         non_negative("energy.rim_check_px", e.rim_check_px)?;
         positive("energy.rim_depth_tolerance", e.rim_depth_tolerance)?;
         within("energy.line_cell_px", e.line_cell_px, 0.5..=64.0)?;
-        // 0 means no limit; a handful of lines per structure could not hold a pose.
+        // 0 means no limit. Fewer than `tracking.min_lines` would lose every frame where one
+        // structure shows in one view, and a handful could not hold a pose.
+        let fewest = self.tracking.min_lines.max(8);
         check(
             "energy.max_lines_per_structure",
-            matches!(e.max_lines_per_structure, 0 | 8..=1_000_000),
+            e.max_lines_per_structure == 0
+                || (fewest..=1_000_000).contains(&e.max_lines_per_structure),
             e.max_lines_per_structure,
-            "it must be 0 (no limit) or lie in 8..=1000000",
+            format!(
+                "it must be 0 (no limit) or lie in {fewest}..=1000000 (at least tracking.min_lines)"
+            ),
         )?;
         non_negative("energy.confidence_band_px", e.confidence_band_px)?;
 

@@ -115,7 +115,8 @@ pub struct Line {
     pub normal: DVec2,
     pub samples: Vec<Sample>,
     /// How many rim lines this one stands for (1, more where the rim was thinned): its
-    /// energy, gradient and normal equations count this many times.
+    /// energy, gradient, normal equations and joint information count this many times, and so
+    /// does it in the confidence and the hidden regions' rim residual.
     pub weight: f64,
 }
 

@@ -144,39 +144,40 @@ fn target_with(
     (mean, var.max(ep.min_softmin_variance_px2))
 }
 
-/// Mean p_f just inside minus just outside the fitted contours, over lines, clamped to [0, 1]
-/// (`contrasts` from [`line_contrasts`]).
-pub fn confidence(contrasts: &[(usize, f64)]) -> f64 {
-    mean_clamped(contrasts.iter().map(|&(_, c)| c))
+/// Mean p_f just inside minus just outside the fitted contours, over lines (each counting as
+/// the rim lines it stands for), clamped to [0, 1] (`contrasts` from [`line_contrasts`]).
+pub fn confidence(contrasts: &[(usize, f64, f64)]) -> f64 {
+    mean_clamped(contrasts.iter().map(|&(_, c, w)| (c, w)))
 }
 
 /// [`confidence`] per structure, then averaged over `structures` (those the forest knows): a
 /// small exophytic tumour counts as much as the kidney, whose outline alone cannot tell the
 /// organ from its mirror image, and a structure without a line (turned out of sight) counts 0.
-pub fn structure_confidence(contrasts: &[(usize, f64)], structures: &[usize]) -> f64 {
-    mean_clamped(
-        structures
-            .iter()
-            .map(|&s| mean_clamped(contrasts.iter().filter(|&&(t, _)| t == s).map(|&(_, c)| c))),
-    )
+pub fn structure_confidence(contrasts: &[(usize, f64, f64)], structures: &[usize]) -> f64 {
+    mean_clamped(structures.iter().map(|&s| {
+        let of_s = contrasts.iter().filter(|&&(t, _, _)| t == s);
+        (mean_clamped(of_s.map(|&(_, c, w)| (c, w))), 1.0)
+    }))
 }
 
-fn mean_clamped(values: impl Iterator<Item = f64>) -> f64 {
-    let (sum, n) = values.fold((0.0, 0usize), |(s, n), v| (s + v, n + 1));
-    if n == 0 {
+/// The weighted mean of (value, weight) pairs, clamped to [0, 1]; 0 without weight.
+fn mean_clamped(values: impl Iterator<Item = (f64, f64)>) -> f64 {
+    let (sum, total) = values.fold((0.0, 0.0), |(s, t), (v, w)| (s + v * w, t + w));
+    if total <= 0.0 {
         0.0
     } else {
-        (sum / n as f64).clamp(0.0, 1.0)
+        (sum / total).clamp(0.0, 1.0)
     }
 }
 
-/// Each line's structure and its mean p_f just inside minus just outside the fitted contour.
+/// Each line's structure, its mean p_f just inside minus just outside the fitted contour, and
+/// its weight (the rim lines it stands for).
 pub fn line_contrasts(
     lines: &[Line],
     state: &FitState,
     ctx: &FrameContext,
     ep: &EnergyParams,
-) -> Vec<(usize, f64)> {
+) -> Vec<(usize, f64, f64)> {
     let deformed = ctx.model.deformed(&state.shape);
     let mut out = Vec::with_capacity(lines.len());
     for line in lines {
@@ -195,7 +196,11 @@ pub fn line_contrasts(
             }
         }
         if nin > 0 && nout > 0 {
-            out.push((line.structure, pin / nin as f64 - pout / nout as f64));
+            out.push((
+                line.structure,
+                pin / nin as f64 - pout / nout as f64,
+                line.weight,
+            ));
         }
     }
     out
@@ -380,10 +385,10 @@ mod tests {
     /// structure the right pose does; a structure turned out of sight counts 0.
     #[test]
     fn per_structure_confidence_lets_the_small_tumour_tell_the_mirror_image() {
-        let lines = |kidney: f64, tumour: Option<f64>| -> Vec<(usize, f64)> {
-            let mut v = vec![(0, kidney); 60];
+        let lines = |kidney: f64, tumour: Option<f64>| -> Vec<(usize, f64, f64)> {
+            let mut v = vec![(0, kidney, 1.0); 60];
             if let Some(t) = tumour {
-                v.extend(std::iter::repeat_n((1, t), 6));
+                v.extend(std::iter::repeat_n((1, t, 1.0), 6));
             }
             v
         };
@@ -400,5 +405,21 @@ mod tests {
             structure_confidence(&right, &structures) > structure_confidence(&hidden, &structures)
         );
         assert_eq!(structure_confidence(&[], &structures), 0.0);
+        // A thinned rim: 12 kidney lines weighing 5 each count as the 60 they stand for.
+        let thinned = |kidney: f64, tumour: f64| -> Vec<(usize, f64, f64)> {
+            let mut v = vec![(0, kidney, 5.0); 12];
+            v.extend(std::iter::repeat_n((1, tumour, 1.0), 6));
+            v
+        };
+        for (k, t) in [(0.9, -0.1), (0.8, 0.7)] {
+            let (whole, thin) = (lines(k, Some(t)), thinned(k, t));
+            assert!((confidence(&whole) - confidence(&thin)).abs() < 1e-12);
+            assert!(
+                (structure_confidence(&whole, &structures)
+                    - structure_confidence(&thin, &structures))
+                .abs()
+                    < 1e-12
+            );
+        }
     }
 }
