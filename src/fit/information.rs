@@ -151,8 +151,10 @@ pub fn joint_information(
         .collect();
     // The rim residual's mean square counts each line as the rim lines it stands for.
     let (mut shift2, mut shifts) = (0.0, 0.0);
-    let weighed = lines.iter().zip(line_rows);
-    for (line, (row, shift, variance)) in weighed.filter_map(|(l, r)| Some((l, r?))) {
+    for (line, row) in lines.iter().zip(line_rows) {
+        let Some((row, shift, variance)) = row else {
+            continue;
+        };
         add_row(&mut h, &row, line.weight / variance);
         if variance != ep.saturated_line_variance_px2 && shift.is_finite() {
             shift2 += line.weight * shift * shift;
