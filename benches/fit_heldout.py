@@ -3,7 +3,7 @@
 widened phantoms, tracked in LS and LSC as a user would, and the table of Dice, hidden-tumour
 centroid error, camera errors and ms per frame for each.
 
-    cargo build --release && python3 benches/fit_heldout.py [--set tuning|test|both] [--keep DIR]
+    cargo build --release && python3 benches/fit_heldout.py [--set tuning|test|both|hard] [--keep DIR]
 
 Every scene is `endofuse synth --vary-rig` (toe-in 1-2 deg, the right principal point up to
 2 px off, k2 and p1/p2, a 20 % zoom over 10-15 frames that half the scenes undo, the principal
@@ -407,6 +407,9 @@ NEXT_TEST = [
     (4912, 480, 270, 0.03, 4, None, False),
 ]
 FRAMES = 40
+# The kind of tuning scene the test sets fail on most (480x270, noise 0.08-0.10, a zoom: each
+# set's x04 and x10 seeds), for trying a change where it matters before the whole tuning set.
+HARD = [s for s in TUNING if (s[1], s[2]) == (480, 270) and s[3] >= 0.08 and s[6]]
 
 
 def run(args):
@@ -582,7 +585,7 @@ def table(name, specs, work):
 
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("--set", default="both", choices=["tuning", "test", "both"])
+    ap.add_argument("--set", default="both", choices=["tuning", "test", "both", "hard"])
     ap.add_argument("--keep", help="folder for scenes and outputs (reused between runs)")
     a = ap.parse_args()
     if not os.path.exists(BIN):
@@ -593,6 +596,8 @@ def main():
         table("tuning", TUNING, work)
     if a.set in ("test", "both"):
         table("test", TEST, work)
+    if a.set == "hard":
+        table("hard tuning", HARD, work)
 
 
 if __name__ == "__main__":
