@@ -262,6 +262,12 @@ pub fn automatic_pose(
     // 0's axes, through the model's centre, is refined too.
     if placing == Placing::Start {
         refiner.polish(placement.polish_deg)?;
+        refiner.settle_near_ties(
+            config,
+            NEAR_TIE_CONFIDENCE,
+            NEAR_TIE_APART_DEG,
+            NEAR_TIE_CONTENDERS,
+        )?;
     }
     refiner.best.map(|b| b.refined).ok_or_else(|| {
         InputError::new(
@@ -321,6 +327,26 @@ pub fn polished_pose(
     })
 }
 
+/// Refined poses this close in confidence to the best are a near tie ([`Refiner::settle_near_ties`]).
+const NEAR_TIE_CONFIDENCE: f64 = 0.03;
+/// ... when at least this far apart in rotation (degrees): a different basin, not the same one.
+const NEAR_TIE_APART_DEG: f64 = 30.0;
+/// At most this many poses settle a tie (each a first-frame fit, ~0.1–0.3 s).
+const NEAR_TIE_CONTENDERS: usize = 3;
+
+/// The angle (degrees) between the rotations of two poses' linear parts.
+fn rotation_apart_deg(a: &Affine, b: &Affine) -> f64 {
+    let (Some(ra), Some(rb)) = (
+        crate::geometry::pose::nearest_rotation(a.linear()),
+        crate::geometry::pose::nearest_rotation(b.linear()),
+    ) else {
+        return 180.0;
+    };
+    crate::geometry::pose::rotation_to_vector(ra * rb.transpose())
+        .length()
+        .to_degrees()
+}
+
 /// The most confident pose a [`Refiner`] has seen.
 #[derive(Debug, Clone, Copy)]
 struct Refined {
@@ -346,6 +372,8 @@ struct Refiner<'a> {
     mean: Arc<Vec<Vec<DVec3>>>,
     centre_pre: DVec3,
     best: Option<Refined>,
+    /// Every pose refined so far, in order.
+    seen: Vec<Refined>,
     cancel: Option<&'a AtomicBool>,
 }
 
@@ -380,6 +408,7 @@ impl<'a> Refiner<'a> {
             mean,
             centre_pre,
             best: None,
+            seen: Vec::new(),
             cancel,
         })
     }
@@ -406,16 +435,91 @@ impl<'a> Refiner<'a> {
         // Per structure: over all lines the kidney's outline outvotes the small tumour, and a
         // mirror image whose outline fits a little better won (a 320×180 phantom: confidence
         // 0.734 against 0.709, tumour Dice 0).
+        let refined = Refined {
+            confidence: fit.structure_confidence,
+            start: affine,
+            refined: fit.state.affine,
+        };
+        self.seen.push(refined);
         if self
             .best
             .is_none_or(|b| fit.structure_confidence > b.confidence)
         {
-            self.best = Some(Refined {
-                confidence: fit.structure_confidence,
-                start: affine,
-                refined: fit.state.affine,
-            });
+            self.best = Some(refined);
         }
+        Ok(())
+    }
+
+    /// A near tie settled by the first frame's own fit. The coarse rigid refinement can leave
+    /// two orientations far apart within a few hundredths of confidence: on tuning scene 1710
+    /// (KiTS case_00204, 480×270, noise 0.10) the right one scored 0.454 and one 141° off
+    /// 0.458, and the wrong one won and was tracked at 0.25–0.36 for 30 frames. Fitted
+    /// coarse to fine as the first frame is (rigid), they score 0.569 and 0.387. So every
+    /// refined pose within `margin` of the best and at least `apart_deg` from each one kept
+    /// (at most `most` in all) is fitted so, and the most confident wins.
+    fn settle_near_ties(
+        &mut self,
+        config: &FitConfig,
+        margin: f64,
+        apart_deg: f64,
+        most: usize,
+    ) -> Result<(), Error> {
+        let Some(best) = self.best else {
+            return Ok(());
+        };
+        let mut ranked = self.seen.clone();
+        ranked.sort_by(|a, b| b.confidence.total_cmp(&a.confidence));
+        let mut contenders: Vec<Refined> = vec![best];
+        for r in ranked {
+            if contenders.len() >= most || r.confidence < best.confidence - margin {
+                break;
+            }
+            if contenders
+                .iter()
+                .all(|c| rotation_apart_deg(&c.refined, &r.refined) >= apart_deg)
+            {
+                contenders.push(r);
+            }
+        }
+        if contenders.len() < 2 {
+            return Ok(());
+        }
+        let width = self.frames.first().map_or(0, |f| f.width());
+        let fine = config.resolve(
+            Mode::R,
+            Phase::FirstFrame,
+            Zoom::Off,
+            config.tracking.fit_level(width),
+        );
+        let pyramid = fine.levels.iter().max().map_or(1, |l| l + 1);
+        let classes = ClassMap::from_scene(self.scene).len();
+        let mut views: Vec<ViewProbabilities> = self
+            .frames
+            .iter()
+            .map(|f| ViewProbabilities::new(f.clone(), pyramid, classes))
+            .collect();
+        let mut winner: Option<(f64, Refined)> = None;
+        for c in contenders {
+            stop_if_cancelled(self.cancel)?;
+            let start = super::tracker::initial_state(self.scene, self.ctx.model, c.refined);
+            let fit = fit_frame(
+                &self.ctx,
+                &start,
+                &start,
+                &mut views,
+                Some(self.appearance),
+                &fine,
+            );
+            log::debug!(
+                "placement near tie: coarse confidence {:.3}, first-frame fit {:.3}",
+                c.confidence,
+                fit.structure_confidence
+            );
+            if winner.is_none_or(|(w, _)| fit.structure_confidence > w) {
+                winner = Some((fit.structure_confidence, c));
+            }
+        }
+        self.best = winner.map(|(_, c)| c);
         Ok(())
     }
 
@@ -438,6 +542,25 @@ impl<'a> Refiner<'a> {
 
 #[cfg(test)]
 mod tests {
+
+    /// Near ties are told apart by the angle between the poses' rotations, whatever their
+    /// scale and translation: 40° about a slanted axis reads 40°, the same rotation scaled 0°.
+    #[test]
+    fn rotation_apart_reads_the_angle_between_poses() {
+        use super::{Affine, rotation_apart_deg, rotation_from_vector};
+        use glam::{DMat3, DVec3};
+        let axis = DVec3::new(1.0, -2.0, 0.5).normalize();
+        let a = rotation_from_vector(axis * 0.3);
+        let b = rotation_from_vector(axis * (0.3 + 40f64.to_radians()));
+        let pose = |r: DMat3, scale: f64, t: DVec3| Affine::from_linear_translation(r * scale, t);
+        let apart = rotation_apart_deg(
+            &pose(a, 1.0, DVec3::ZERO),
+            &pose(b, 1.1, DVec3::new(5.0, 0.0, 150.0)),
+        );
+        assert!((apart - 40.0).abs() < 1e-6, "{apart}");
+        let same = rotation_apart_deg(&pose(a, 1.0, DVec3::ZERO), &pose(a, 0.9, DVec3::X));
+        assert!(same < 1e-6, "{same}");
+    }
 
     /// The hand placement's start: the organ's centre on camera 0's axis, its projection about
     /// 40 % of the image wide, the orientation untouched; a degenerate mesh still gives a
