@@ -454,7 +454,7 @@ impl<'a> Refiner<'a> {
     /// two orientations far apart within a few hundredths of confidence: on tuning scene 1710
     /// (KiTS case_00204, 480×270, noise 0.10) the right one scored 0.454 and one 141° off
     /// 0.458, and the wrong one won and was tracked at 0.25–0.36 for 30 frames. Fitted
-    /// coarse to fine as the first frame is (rigid), they score 0.569 and 0.387. So every
+    /// coarse to fine as the first frame is (rigid), they score 0.563 and 0.415. So every
     /// refined pose within `margin` of the best and at least `apart_deg` from each one kept
     /// (at most `most` in all) is fitted so, and the most confident wins.
     fn settle_near_ties(
