@@ -374,9 +374,10 @@ TUNING = [
     (4510, 480, 270, 0.10, 2, "case_00010", True),
     (4511, 960, 540, 0.10, 2, None, True),
     (4512, 480, 270, 0.03, 4, None, False),
-]
-# The twenty-second, fixed on 2026-12-07 (twenty-fourth session) before 4501-4512 were run.
-TEST = [
+    # The twenty-second: run once on 2026-12-07 (twenty-fifth session) with that session's
+    # build (near ties in the placement settled by the first frame's fit; LSC Dice 0.965,
+    # hidden 1.91 / 7.16 mm, fx 0.97 %, k1 0.016, placement min 0.962; its timings were taken
+    # beside a CI run), so it joined the tuning set; 4901-4912 had been fixed before it was run.
     (4701, 960, 540, 0.05, 2, None, True),
     (4702, 960, 540, 0.03, 2, "case_00023", True),
     (4703, 960, 540, 0.08, 2, None, False),
@@ -390,9 +391,8 @@ TEST = [
     (4711, 960, 540, 0.10, 2, None, True),
     (4712, 480, 270, 0.03, 4, None, False),
 ]
-# The twenty-third, fixed on 2026-12-07 (twenty-fifth session) before 4701-4712 were run:
-# the next test set once those have been reported and joined the tuning set.
-NEXT_TEST = [
+# The twenty-third, fixed on 2026-12-07 (twenty-fifth session) before 4701-4712 were run.
+TEST = [
     (4901, 960, 540, 0.05, 2, None, True),
     (4902, 960, 540, 0.03, 2, "case_00003", True),
     (4903, 960, 540, 0.08, 2, None, False),
@@ -405,6 +405,22 @@ NEXT_TEST = [
     (4910, 480, 270, 0.10, 2, "case_00010", True),
     (4911, 960, 540, 0.10, 2, None, True),
     (4912, 480, 270, 0.03, 4, None, False),
+]
+# The twenty-fourth, fixed on 2026-12-07 (twenty-fifth session) before 4901-4912 were run:
+# the next test set once those have been reported and joined the tuning set.
+NEXT_TEST = [
+    (5101, 960, 540, 0.05, 2, None, True),
+    (5102, 960, 540, 0.03, 2, "case_00010", True),
+    (5103, 960, 540, 0.08, 2, None, False),
+    (5104, 480, 270, 0.10, 2, None, True),
+    (5105, 480, 270, 0.03, 2, "case_00003", True),
+    (5106, 480, 270, 0.05, 2, None, True),
+    (5107, 480, 270, 0.08, 2, "case_00170", False),
+    (5108, 480, 270, 0.05, 4, None, True),
+    (5109, 960, 540, 0.02, 2, None, True),
+    (5110, 480, 270, 0.10, 2, "case_00023", True),
+    (5111, 960, 540, 0.10, 2, None, True),
+    (5112, 480, 270, 0.03, 4, None, False),
 ]
 FRAMES = 40
 # The kind of tuning scene the test sets fail on most (480x270, noise 0.08-0.10, a zoom: each
