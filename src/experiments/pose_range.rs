@@ -11,10 +11,11 @@
 //! the last recovered and the first failed one.
 
 use super::Progress;
-use super::rig::{NoisyImage, Rig, noisy_images, rotation_error_deg};
+use super::rig::{NoisyImage, Rig, noisy_images};
 use crate::fit::config::{Phase, Zoom};
 use crate::fit::{FitState, Mode};
 use crate::geometry::Affine;
+use crate::geometry::pose::rotation_apart_deg;
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
 
@@ -220,7 +221,7 @@ impl Searcher<'_> {
             .map(|trial| {
                 let fit = self.rig.fit(trial, &start, &params);
                 let d = self.rig.dice_against(&fit, self.truths);
-                let r = rotation_error_deg(&fit.affine, &self.rig.truth.affine);
+                let r = rotation_apart_deg(&fit.affine, &self.rig.truth.affine);
                 log::debug!(
                     "pose range: {} views, {} = {value:.3}: Dice {d:.3}, rotation error {r:.1}°",
                     self.rig.scene.cameras.len(),
@@ -348,7 +349,7 @@ mod tests {
         for p in [Param::ThetaX, Param::ThetaY, Param::ThetaZ] {
             let a = perturbed(&truth, c, p, 30.0);
             assert!((a.apply(src) - c).length() < 1e-9);
-            assert!((rotation_error_deg(&a, &truth) - 30.0).abs() < 1e-6);
+            assert!((rotation_apart_deg(&a, &truth) - 30.0).abs() < 1e-6);
         }
         let s = perturbed(&truth, c, Param::Sx, 2.0);
         let moved = s.apply(src + DVec3::X) - c;

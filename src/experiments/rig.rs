@@ -223,19 +223,6 @@ impl Rig {
     }
 }
 
-/// Angle (degrees) between the rotations of two affine poses (each the nearest rotation of its
-/// linear part); 180 where one has none.
-pub fn rotation_error_deg(a: &Affine, b: &Affine) -> f64 {
-    match (a.to_rigid(), b.to_rigid()) {
-        (Some(ra), Some(rb)) => {
-            let r = ra.rotation() * rb.rotation().transpose();
-            let cos = ((r.x_axis.x + r.y_axis.y + r.z_axis.z - 1.0) / 2.0).clamp(-1.0, 1.0);
-            cos.acos().to_degrees()
-        }
-        _ => 180.0,
-    }
-}
-
 /// One camera's image by eq. 10 with noise: intensity 1 inside the silhouette, 0 outside,
 /// plus N(0, σ²) per pixel (not clipped).
 #[derive(Debug, Clone)]

@@ -19,7 +19,7 @@ use super::probability::ViewProbabilities;
 use crate::appearance::features::downsample;
 use crate::appearance::{Appearance, ClassMap};
 use crate::error::{Error, InputError, stop_if_cancelled};
-use crate::geometry::pose::rotation_from_vector;
+use crate::geometry::pose::{rotation_apart_deg, rotation_from_vector};
 use crate::geometry::{Affine, Camera};
 use crate::plane::Plane;
 use crate::render::raster::{RasterOptions, ViewRaster, rasterize};
@@ -334,19 +334,6 @@ const NEAR_TIE_APART_DEG: f64 = 30.0;
 /// At most this many poses settle a tie (each a first-frame fit, ~0.1–0.3 s).
 const NEAR_TIE_CONTENDERS: usize = 3;
 
-/// The angle (degrees) between the rotations of two poses' linear parts.
-fn rotation_apart_deg(a: &Affine, b: &Affine) -> f64 {
-    let (Some(ra), Some(rb)) = (
-        crate::geometry::pose::nearest_rotation(a.linear()),
-        crate::geometry::pose::nearest_rotation(b.linear()),
-    ) else {
-        return 180.0;
-    };
-    crate::geometry::pose::rotation_to_vector(ra * rb.transpose())
-        .length()
-        .to_degrees()
-}
-
 /// The most confident pose a [`Refiner`] has seen.
 #[derive(Debug, Clone, Copy)]
 struct Refined {
@@ -542,25 +529,6 @@ impl<'a> Refiner<'a> {
 
 #[cfg(test)]
 mod tests {
-
-    /// Near ties are told apart by the angle between the poses' rotations, whatever their
-    /// scale and translation: 40° about a slanted axis reads 40°, the same rotation scaled 0°.
-    #[test]
-    fn rotation_apart_reads_the_angle_between_poses() {
-        use super::{Affine, rotation_apart_deg, rotation_from_vector};
-        use glam::{DMat3, DVec3};
-        let axis = DVec3::new(1.0, -2.0, 0.5).normalize();
-        let a = rotation_from_vector(axis * 0.3);
-        let b = rotation_from_vector(axis * (0.3 + 40f64.to_radians()));
-        let pose = |r: DMat3, scale: f64, t: DVec3| Affine::from_linear_translation(r * scale, t);
-        let apart = rotation_apart_deg(
-            &pose(a, 1.0, DVec3::ZERO),
-            &pose(b, 1.1, DVec3::new(5.0, 0.0, 150.0)),
-        );
-        assert!((apart - 40.0).abs() < 1e-6, "{apart}");
-        let same = rotation_apart_deg(&pose(a, 1.0, DVec3::ZERO), &pose(a, 0.9, DVec3::X));
-        assert!(same < 1e-6, "{same}");
-    }
 
     /// The hand placement's start: the organ's centre on camera 0's axis, its projection about
     /// 40 % of the image wide, the orientation untouched; a degenerate mesh still gives a

@@ -169,6 +169,19 @@ pub fn skew(v: DVec3) -> DMat3 {
     )
 }
 
+/// Angle (degrees) between the rotations of two affine poses (each the nearest rotation of its
+/// linear part, its uniform scale taken out); 180 where one has none.
+pub fn rotation_apart_deg(a: &Affine, b: &Affine) -> f64 {
+    match (a.to_rigid(), b.to_rigid()) {
+        (Some(ra), Some(rb)) => {
+            let r = ra.rotation() * rb.rotation().transpose();
+            let cos = ((r.x_axis.x + r.y_axis.y + r.z_axis.z - 1.0) / 2.0).clamp(-1.0, 1.0);
+            cos.acos().to_degrees()
+        }
+        _ => 180.0,
+    }
+}
+
 /// Rodrigues' formula.
 pub fn rotation_from_vector(w: DVec3) -> DMat3 {
     let theta = w.length();
@@ -239,6 +252,24 @@ pub fn nearest_rotation(m: DMat3) -> Option<DMat3> {
 
 #[cfg(test)]
 mod tests {
+    /// The angle between two poses' rotations (the placement's near ties are told apart by
+    /// it), whatever their scale and translation: 40° about a slanted axis reads 40°, the
+    /// same rotation scaled 0°.
+    #[test]
+    fn rotation_apart_reads_the_angle_between_poses() {
+        let axis = DVec3::new(1.0, -2.0, 0.5).normalize();
+        let a = rotation_from_vector(axis * 0.3);
+        let b = rotation_from_vector(axis * (0.3 + 40f64.to_radians()));
+        let pose = |r: DMat3, scale: f64, t: DVec3| Affine::from_linear_translation(r * scale, t);
+        let apart = rotation_apart_deg(
+            &pose(a, 1.0, DVec3::ZERO),
+            &pose(b, 1.1, DVec3::new(5.0, 0.0, 150.0)),
+        );
+        assert!((apart - 40.0).abs() < 1e-6, "{apart}");
+        let same = rotation_apart_deg(&pose(a, 1.0, DVec3::ZERO), &pose(a, 0.9, DVec3::X));
+        assert!(same < 1e-6, "{same}");
+    }
+
     use super::*;
     use crate::rng::Rng;
 
