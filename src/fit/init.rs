@@ -262,12 +262,7 @@ pub fn automatic_pose(
     // 0's axes, through the model's centre, is refined too.
     if placing == Placing::Start {
         refiner.polish(placement.polish_deg)?;
-        refiner.settle_near_ties(
-            config,
-            NEAR_TIE_CONFIDENCE,
-            NEAR_TIE_APART_DEG,
-            NEAR_TIE_CONTENDERS,
-        )?;
+        refiner.settle_near_ties(NEAR_TIE_CONFIDENCE, NEAR_TIE_APART_DEG, NEAR_TIE_CONTENDERS)?;
     }
     refiner.best.map(|b| b.refined).ok_or_else(|| {
         InputError::new(
@@ -352,6 +347,8 @@ struct Refiner<'a> {
     scene: &'a Scene,
     appearance: &'a Appearance,
     params: FitParams,
+    /// The first frame's own fit, rigid: what settles a near tie.
+    first_frame: FitParams,
     /// The frame of every view, full resolution.
     frames: Vec<Arc<image::RgbImage>>,
     views: Vec<ViewProbabilities>,
@@ -378,7 +375,21 @@ impl<'a> Refiner<'a> {
             .map(|c| scene.frame(c, t))
             .collect::<Result<_, _>>()?;
         let params = config.resolve(Mode::R, Phase::Placement, Zoom::Off, 0);
-        let pyramid = params.levels.iter().max().map_or(1, |l| l + 1);
+        let width = frames.first().map_or(0, |f| f.width());
+        let first_frame = config.resolve(
+            Mode::R,
+            Phase::FirstFrame,
+            Zoom::Off,
+            config.tracking.fit_level(width),
+        );
+        // Levels are made on first use: the first frame's, deeper at 960×540, cost nothing
+        // until a near tie needs them, and then reuse what the placement classified.
+        let pyramid = params
+            .levels
+            .iter()
+            .chain(&first_frame.levels)
+            .max()
+            .map_or(1, |l| l + 1);
         let classes = ClassMap::from_scene(scene).len();
         let mean = model.deformed(&vec![0.0; model.shape.mode_count()]);
         let centre_pre = crate::geometry::mesh::vertex_mean(&mean[model.anchor]);
@@ -392,6 +403,7 @@ impl<'a> Refiner<'a> {
                 .collect(),
             frames,
             params,
+            first_frame,
             mean,
             centre_pre,
             best: None,
@@ -444,13 +456,7 @@ impl<'a> Refiner<'a> {
     /// coarse to fine as the first frame is (rigid), they score 0.563 and 0.415. So every
     /// refined pose within `margin` of the best and at least `apart_deg` from each one kept
     /// (at most `most` in all) is fitted so, and the most confident wins.
-    fn settle_near_ties(
-        &mut self,
-        config: &FitConfig,
-        margin: f64,
-        apart_deg: f64,
-        most: usize,
-    ) -> Result<(), Error> {
+    fn settle_near_ties(&mut self, margin: f64, apart_deg: f64, most: usize) -> Result<(), Error> {
         let Some(best) = self.best else {
             return Ok(());
         };
@@ -471,20 +477,6 @@ impl<'a> Refiner<'a> {
         if contenders.len() < 2 {
             return Ok(());
         }
-        let width = self.frames.first().map_or(0, |f| f.width());
-        let fine = config.resolve(
-            Mode::R,
-            Phase::FirstFrame,
-            Zoom::Off,
-            config.tracking.fit_level(width),
-        );
-        let pyramid = fine.levels.iter().max().map_or(1, |l| l + 1);
-        let classes = ClassMap::from_scene(self.scene).len();
-        let mut views: Vec<ViewProbabilities> = self
-            .frames
-            .iter()
-            .map(|f| ViewProbabilities::new(f.clone(), pyramid, classes))
-            .collect();
         let mut winner: Option<(f64, Refined)> = None;
         for c in contenders {
             stop_if_cancelled(self.cancel)?;
@@ -493,9 +485,9 @@ impl<'a> Refiner<'a> {
                 &self.ctx,
                 &start,
                 &start,
-                &mut views,
+                &mut self.views,
                 Some(self.appearance),
-                &fine,
+                &self.first_frame,
             );
             log::debug!(
                 "placement near tie: coarse confidence {:.3}, first-frame fit {:.3}",
