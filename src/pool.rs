@@ -69,6 +69,32 @@ pub fn on_workers<T: Send>(f: impl FnOnce() -> T + Send) -> T {
     rayon::join(f, || ()).0
 }
 
+thread_local! {
+    /// Set while [`serially`] runs on this thread: the loops that ask [`min_split`] then run
+    /// whole on it.
+    static SERIAL: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// Runs `f` with the parallel loops that ask [`min_split`] kept whole on this thread. For
+/// coarse work split by hand (one view per core): inside it, a thread waiting on its own
+/// nested loop would steal the other view whole, and the two would run one after the other.
+pub fn serially<T>(f: impl FnOnce() -> T) -> T {
+    let before = SERIAL.with(|s| s.replace(true));
+    let r = f();
+    SERIAL.with(|s| s.set(before));
+    r
+}
+
+/// The least number of items a parallel loop of `items` may split into pieces of
+/// (`with_min_len`): all of them inside [`serially`], else `at_least`.
+pub fn min_split(items: usize, at_least: usize) -> usize {
+    if SERIAL.with(|s| s.get()) {
+        items.max(1)
+    } else {
+        at_least.max(1)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -101,5 +127,38 @@ mod tests {
             (outer.is_some(), outer == inner)
         });
         assert!(on_pool && nested);
+    }
+
+    /// Inside `serially` a loop that asks `min_split` runs whole on the calling thread, on a
+    /// pool of two threads too; outside it, and after it, the loop may split again.
+    #[test]
+    fn serially_keeps_a_loop_on_its_thread() {
+        use rayon::prelude::*;
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(2)
+            .build()
+            .unwrap();
+        let threads_of_loop = || {
+            let ids: Vec<std::thread::ThreadId> = (0..4096)
+                .into_par_iter()
+                .with_min_len(super::min_split(4096, 1))
+                .map(|_| std::thread::current().id())
+                .collect();
+            (
+                ids.iter().all(|&t| t == std::thread::current().id()),
+                ids.len(),
+            )
+        };
+        pool.install(|| {
+            assert_eq!(super::serially(threads_of_loop), (true, 4096));
+            assert_eq!(super::min_split(4096, 16), 16);
+            assert_eq!(super::serially(|| super::min_split(4096, 16)), 4096);
+            // Nested: the outer call's setting comes back when the inner one returns.
+            super::serially(|| {
+                super::serially(|| ());
+                assert_eq!(super::min_split(10, 1), 10);
+            });
+            assert_eq!(super::min_split(10, 1), 1);
+        });
     }
 }

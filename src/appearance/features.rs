@@ -251,7 +251,7 @@ fn base_of_region(
     let mut out = BASES.take(w * h, [0u8; CHANNELS]);
     out.par_chunks_mut(w.max(1))
         .enumerate()
-        .with_min_len(16)
+        .with_min_len(crate::pool::min_split(h, 16))
         .for_each(|(y, row)| {
             let start = ((y0 + y) * fw + x0) * 3;
             base_channels_many(&raw[start..start + 3 * row.len()], row);
@@ -554,6 +554,7 @@ impl FrameFeatures {
         vector: impl Fn(&Self, usize, usize) -> FeatureVector + Sync,
     ) -> Vec<FeatureVector> {
         list.par_iter()
+            .with_min_len(crate::pool::min_split(list.len(), 1))
             .map(|&(x, y)| {
                 let (lx, ly) = self.local(x, y);
                 vector(self, lx, ly)

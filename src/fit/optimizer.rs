@@ -411,18 +411,23 @@ pub fn fit_frame(
                     since_build += 1;
                     last_level = Some(level);
                     iterations += 1;
+                    // One thread: a step's loops over 128 lines take 50–150 µs, about what
+                    // waking the pool's other thread costs (4703, LS: steps 2.0 ms a frame on
+                    // one thread, 2.4 on two).
                     let next = super::profile::time(super::profile::Phase::Steps, || {
-                        step(
-                            ctx,
-                            &lines,
-                            &matches,
-                            &state,
-                            prev,
-                            block,
-                            &ep,
-                            params,
-                            lines_energy,
-                        )
+                        crate::pool::serially(|| {
+                            step(
+                                ctx,
+                                &lines,
+                                &matches,
+                                &state,
+                                prev,
+                                block,
+                                &ep,
+                                params,
+                                lines_energy,
+                            )
+                        })
                     });
                     match next {
                         Some((next, energy)) => (state, lines_energy) = (next, Some(energy)),

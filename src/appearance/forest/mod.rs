@@ -256,6 +256,7 @@ impl Forest {
         let inv = 1.0 / self.trees.len() as f32;
         out.par_chunks_mut(BLOCK * k)
             .zip(features.par_chunks(BLOCK))
+            .with_min_len(crate::pool::min_split(features.len().div_ceil(BLOCK), 1))
             .for_each(|(o, fs)| {
                 let mut sum = |state: Option<&mut MaskState>| match groups {
                     1 => self.sum_block::<1>(fs, o, inv, state),

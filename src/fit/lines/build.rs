@@ -182,21 +182,23 @@ impl FrameContext<'_> {
             })
             .collect();
         let (mut lines, rasters): (Vec<Vec<Line>>, Vec<ViewRaster>) = per_view.into_iter().unzip();
-        // The probabilities one view after another, each with every thread: inside the views'
-        // parallel loop, a thread waiting on its view's nested parallel work would pick up the
-        // other view whole, and the two ran one after the other in about a third of frames
-        // (1301: 3.4 ms per view, 3.6 ms for both when they overlapped, 5.9–7.0 ms when not).
-        // Measured over the whole frame, alternating builds 8 times on a noisy machine: LS
-        // median 2–3 % faster (1301, 1503), within the noise but not slower.
-        for (view, view_lines) in views.iter_mut().zip(&lines) {
-            let pixels: Vec<u32> = view_lines
-                .iter()
-                .flat_map(|l| l.samples.iter().map(|s| s.pixel))
-                .collect();
-            crate::fit::profile::time(crate::fit::profile::Phase::Probabilities, || {
-                view.ensure(appearance, params.level, &pixels)
-            });
-        }
+        // One view per thread, each view's own loops kept on its thread (`serially`): with
+        // nested parallel loops a thread waiting on its view's work picked up the other view
+        // whole, and the two ran one after the other in about a third of frames. The views'
+        // feature tables are filled serially anyway, so one view per core is the split that
+        // uses both (4703 at 960×540: 2.5–2.8 ms a view alone, 2.6–4.1 ms for both at once).
+        crate::fit::profile::time(crate::fit::profile::Phase::Probabilities, || {
+            views
+                .par_iter_mut()
+                .zip(lines.par_iter())
+                .for_each(|(view, view_lines)| {
+                    let pixels: Vec<u32> = view_lines
+                        .iter()
+                        .flat_map(|l| l.samples.iter().map(|s| s.pixel))
+                        .collect();
+                    crate::pool::serially(|| view.ensure(appearance, params.level, &pixels));
+                });
+        });
         lines
             .par_iter_mut()
             .zip(views.par_iter())

@@ -257,6 +257,7 @@ impl FrameContext<'_> {
         // Fixed chunks summed in order: parallel, and the same sum on every run.
         lines
             .par_chunks(LINE_CHUNK)
+            .with_min_len(crate::pool::min_split(lines.len().div_ceil(LINE_CHUNK), 1))
             .map(|chunk| chunk.iter().map(line_energy).sum::<f64>())
             .collect::<Vec<f64>>()
             .into_iter()
@@ -460,7 +461,15 @@ impl ImageTerm for LineTerm<'_> {
             }
             part
         };
-        let parts: Vec<NormalEquations> = self.lines.par_chunks(LINE_CHUNK).map(partial).collect();
+        let parts: Vec<NormalEquations> = self
+            .lines
+            .par_chunks(LINE_CHUNK)
+            .with_min_len(crate::pool::min_split(
+                self.lines.len().div_ceil(LINE_CHUNK),
+                1,
+            ))
+            .map(partial)
+            .collect();
         for part in parts {
             eq.h += part.h;
             eq.b += part.b;
