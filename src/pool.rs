@@ -79,10 +79,16 @@ thread_local! {
 /// coarse work split by hand (one view per core): inside it, a thread waiting on its own
 /// nested loop would steal the other view whole, and the two would run one after the other.
 pub fn serially<T>(f: impl FnOnce() -> T) -> T {
-    let before = SERIAL.with(|s| s.replace(true));
-    let r = f();
-    SERIAL.with(|s| s.set(before));
-    r
+    /// Puts the thread's setting back however `f` ends, a panic included: a pool thread
+    /// outlives the work, and left set it would run every later loop alone.
+    struct Restore(bool);
+    impl Drop for Restore {
+        fn drop(&mut self) {
+            SERIAL.with(|s| s.set(self.0));
+        }
+    }
+    let _restore = Restore(SERIAL.with(|s| s.replace(true)));
+    f()
 }
 
 /// The least number of items a parallel loop of `items` may split into pieces of
@@ -158,6 +164,10 @@ mod tests {
                 super::serially(|| ());
                 assert_eq!(super::min_split(10, 1), 10);
             });
+            assert_eq!(super::min_split(10, 1), 1);
+            // A panic inside it leaves the thread as it was.
+            let caught = std::panic::catch_unwind(|| super::serially(|| panic!("inside")));
+            assert!(caught.is_err());
             assert_eq!(super::min_split(10, 1), 1);
         });
     }
