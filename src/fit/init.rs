@@ -14,7 +14,7 @@
 use super::config::{FitConfig, FitParams, Mode, Phase, Zoom};
 use super::context::FrameContext;
 use super::model::Model;
-use super::optimizer::fit_frame;
+use super::optimizer::{FrameFit, fit_frame};
 use super::probability::ViewProbabilities;
 use crate::appearance::features::downsample;
 use crate::appearance::{Appearance, ClassMap};
@@ -329,6 +329,15 @@ const NEAR_TIE_APART_DEG: f64 = 30.0;
 /// At most this many poses settle a tie (each a first-frame fit, ~0.1–0.3 s).
 const NEAR_TIE_CONTENDERS: usize = 3;
 
+/// Which of a [`Refiner`]'s settings a fit runs with.
+#[derive(Debug, Clone, Copy)]
+enum Settings {
+    /// The placement's coarse rigid refinement.
+    Placement,
+    /// The first frame's own fit, rigid, coarse to fine: what settles a near tie.
+    FirstFrame,
+}
+
 /// The most confident pose a [`Refiner`] has seen.
 #[derive(Debug, Clone, Copy)]
 struct Refined {
@@ -412,17 +421,27 @@ impl<'a> Refiner<'a> {
         })
     }
 
-    fn refine(&mut self, affine: Affine) -> Result<(), Error> {
+    /// This frame fitted from `affine` (the mean shape) with the placement's coarse settings
+    /// or the first frame's own.
+    fn fit_from(&mut self, affine: Affine, settings: Settings) -> Result<FrameFit, Error> {
         stop_if_cancelled(self.cancel)?;
         let start = super::tracker::initial_state(self.scene, self.ctx.model, affine);
-        let fit = fit_frame(
+        let params = match settings {
+            Settings::Placement => &self.params,
+            Settings::FirstFrame => &self.first_frame,
+        };
+        Ok(fit_frame(
             &self.ctx,
             &start,
             &start,
             &mut self.views,
             Some(self.appearance),
-            &self.params,
-        );
+            params,
+        ))
+    }
+
+    fn refine(&mut self, affine: Affine) -> Result<(), Error> {
+        let fit = self.fit_from(affine, Settings::Placement)?;
         log::debug!(
             "placement candidate: confidence {:.3} (per structure {:.3}), energy {:.1}, affine \
              {:?}",
@@ -479,16 +498,7 @@ impl<'a> Refiner<'a> {
         }
         let mut winner: Option<(f64, Refined)> = None;
         for c in contenders {
-            stop_if_cancelled(self.cancel)?;
-            let start = super::tracker::initial_state(self.scene, self.ctx.model, c.refined);
-            let fit = fit_frame(
-                &self.ctx,
-                &start,
-                &start,
-                &mut self.views,
-                Some(self.appearance),
-                &self.first_frame,
-            );
+            let fit = self.fit_from(c.refined, Settings::FirstFrame)?;
             log::debug!(
                 "placement near tie: coarse confidence {:.3}, first-frame fit {:.3}",
                 c.confidence,
